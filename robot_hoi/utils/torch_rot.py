@@ -37,10 +37,11 @@ def quat_conj(q: Tensor) -> Tensor:
 
 def quat_apply(q: Tensor, v: Tensor) -> Tensor:
     """Rotate vectors v by unit quaternions q (broadcasting over leading dims)."""
-    w = q[..., :1]
-    xyz = q[..., 1:]
-    t = 2.0 * torch.cross(xyz.expand_as(v), v, dim=-1)
-    return v + w * t + torch.cross(xyz.expand_as(v), t, dim=-1)
+    batch = torch.broadcast_shapes(q.shape[:-1], v.shape[:-1])
+    q, v = q.expand(*batch, 4), v.expand(*batch, 3)
+    w, xyz = q[..., :1], q[..., 1:]
+    t = 2.0 * torch.cross(xyz, v, dim=-1)
+    return v + w * t + torch.cross(xyz, t, dim=-1)
 
 
 def quat_apply_inverse(q: Tensor, v: Tensor) -> Tensor:

@@ -1,0 +1,114 @@
+"""The training/validation scene: robot + floor + the clip's object, with the sensors the tasks read.
+
+Sensors are laid out in blocks so the environment slices them without per-link Python work:
+link positions (L x 3), link quaternions wxyz (L x 4), link linear velocities (L x 3), then contact sensors
+(C x [found, fx, fy, fz]). Link L follows the embodiment's `link_map` order.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+import trimesh
+
+OBJECT_BODY = "object"
+OBJECT_JOINT = "object_joint"
+FINGERS = ("pinky", "ring", "middle", "index", "thumb")
+
+
+@dataclass
+class SceneLayout:
+    """Index maps into qpos/qvel/sensordata of a compiled scene (resolved once)."""
+
+    link_names: list[str]
+    actuator_names: list[str]
+    actuator_qpos: np.ndarray      # (A,) qpos address of each actuated joint
+    actuator_dof: np.ndarray       # (A,) dof address of each actuated joint
+    robot_nq: int                  # free base 7 + all robot joints (actuated + passive)
+    robot_nv: int
+    object_qpos: int               # address of the object's free joint (pos 3 + quat wxyz 4)
+    object_dof: int
+    link_pos: slice
+    link_quat: slice
+    link_vel: slice
+    contact_names: list[str]
+    contact: slice                 # C x 4 values: found, force xyz
+
+    @property
+    def num_links(self) -> int:
+        return len(self.link_names)
+
+
+def _hand_bodies(spec: mujoco.MjSpec, prefix: str) -> dict[str, str]:
+    """Top body of each finger chain and the palm for a hand prefix ('L_' / 'R_')."""
+    names = [b.name for b in spec.bodies]
+    out = {"hand": next(n for n in names if n.startswith(prefix) and "hand_base" in n)}
+    for finger in FINGERS:
+        chain = [n for n in names if n.startswith(f"{prefix}{finger}_")]
+        out[finger] = chain[0]  # bodies are listed parent-first
+    return out
+
+
+def add_object(spec: mujoco.MjSpec, vertices: np.ndarray, faces: np.ndarray, *, density: float, friction: float,
+               contype: int, conaffinity: int) -> None:
+    """The object as one convex hull of its mesh with a free joint (InterMimic: density 200, friction 0.9)."""
+    hull = trimesh.Trimesh(vertices=vertices, faces=faces, process=True).convex_hull
+    mesh = spec.add_mesh(name="object_hull")
+    mesh.uservert = np.asarray(hull.vertices, dtype=np.float32).ravel()
+    mesh.userface = np.asarray(hull.faces, dtype=np.int32).ravel()
+    # Explicit mass properties of the hull at `density`: the robot's spec does not infer inertia from geoms.
+    hull.density = density
+    inertia = hull.moment_inertia
+    body = spec.worldbody.add_body(name=OBJECT_BODY, pos=[2.0, 0.0, 0.5])
+    body.explicitinertial = True
+    body.mass = float(hull.mass)
+    body.ipos = np.asarray(hull.center_mass, dtype=np.float64)
+    body.fullinertia = [inertia[0, 0], inertia[1, 1], inertia[2, 2], inertia[0, 1], inertia[0, 2], inertia[1, 2]]
+    body.add_freejoint(name=OBJECT_JOINT)
+    body.add_geom(type=mujoco.mjtGeom.mjGEOM_MESH, meshname="object_hull", density=density,
+                  friction=[friction, 0.005, 0.0001], contype=contype, conaffinity=conaffinity,
+                  rgba=[0.8, 0.55, 0.3, 1.0])
+
+
+def add_sensors(spec: mujoco.MjSpec, link_map: dict[str, str]) -> list[str]:
+    """Link pose/velocity blocks and contact sensors; returns the contact sensor names in order."""
+    body_names = {b.name for b in spec.bodies}
+    site_names = {s.name for s in spec.sites}
+
+    def frame(link: str):
+        if link in site_names:
+            return mujoco.mjtObj.mjOBJ_SITE
+        if link in body_names:
+            return mujoco.mjtObj.mjOBJ_XBODY
+        raise KeyError(f"link_map entry {link!r} is neither a body nor a site of the robot")
+
+    for kind in (mujoco.mjtSensor.mjSENS_FRAMEPOS, mujoco.mjtSensor.mjSENS_FRAMEQUAT,
+                 mujoco.mjtSensor.mjSENS_FRAMELINVEL):
+        for link in link_map:
+            spec.add_sensor(type=kind, objtype=frame(link), objname=link)
+
+    contacts: list[tuple[str, str, str]] = []  # (name, subtree, other body)
+    for side, prefix in (("left", "L_"), ("right", "R_")):
+        hand = _hand_bodies(spec, prefix)
+        contacts.append((f"{side}_hand", hand["hand"], OBJECT_BODY))
+        contacts += [(f"{prefix}{finger}", hand[finger], "") for finger in FINGERS]
+    for name, subtree, other in (("torso", "torso_link", OBJECT_BODY),
+                                 ("left_elbow", "left_elbow_link", OBJECT_BODY),
+                                 ("right_elbow", "right_elbow_link", OBJECT_BODY),
+                                 ("left_foot", "left_ankle_roll_link", "world"),
+                                 ("right_foot", "right_ankle_roll_link", "world")):
+        contacts.append((name, subtree, other))
+    for name, subtree, other in contacts:
+        sensor = spec.add_sensor(name=f"contact_{name}", type=mujoco.mjtSensor.mjSENS_CONTACT)
+        sensor.objtype = mujoco.mjtObj.mjOBJ_XBODY  # subtree1 is given as a body with subtree semantics
+        sensor.objname = subtree
+        if other:
+            sensor.reftype = mujoco.mjtObj.mjOBJ_BODY
+            sensor.refname = other
+        # data = found (bit 0) + force (bit 1); reduce = netforce (3); one slot
+        sensor.intprm[0] = (1 << 0) | (1 << 1)
+        sensor.intprm[1] = 3
+        sensor.intprm[2] = 1
+    return [c[0] for c in contacts]

@@ -1,0 +1,1 @@
+"""Tasks: an environment config + its MDP terms (observations, rewards, terminations) per folder."""

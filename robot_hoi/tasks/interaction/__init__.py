@@ -1,0 +1,1 @@
+"""Human-object interaction imitation on the robot (InterMimic teachers)."""

@@ -1,0 +1,297 @@
+"""Interaction-imitation environment: the G1+Inspire tracks a robot-space HOI reference with the clip's object.
+
+step(): actions -> PD targets -> physics (decimation sub-steps in the backend) -> state -> reference clock
+-> rewards -> terminations -> PSI bookkeeping -> resets -> observations. Terms live in mdp/; this class only
+composes them. All tensors are batched over environments; no per-environment Python on the step path.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+from torch import Tensor
+
+from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg
+from robot_hoi.tasks.interaction.mdp import observations as obs_terms
+from robot_hoi.tasks.interaction.mdp import rewards as reward_terms
+from robot_hoi.tasks.interaction.mdp import terminations as term_terms
+from robot_hoi.tasks.interaction.psi import PsiBuffer
+from robot_hoi.tasks.interaction.reference import ReferenceMotion, nearest_surface_vectors
+from robot_hoi.tasks.interaction.scene_setup import InteractionScene
+from robot_hoi.utils.torch_rot import quat_apply, quat_apply_inverse, quat_mul, yaw_quat
+
+
+@dataclass
+class ReferenceFrame:
+    link_pos: Tensor
+    link_quat_wxyz: Tensor
+    d_hat: Tensor
+    object_pos: Tensor
+    object_quat_wxyz: Tensor
+    hand_contact: Tensor
+    hand_distance: Tensor
+
+
+class InteractionEnv:
+    """Implements robot_hoi.rl.env.VecEnv."""
+
+    def __init__(self, cfg: InteractionEnvCfg, scene: InteractionScene, references: list[ReferenceMotion]):
+        self.cfg = cfg
+        self.scene = scene
+        self.device = torch.device("cpu")
+        self.num_envs = cfg.num_envs
+        self.backend = scene.make_backend(cfg.num_envs, backend=cfg.backend, nthread=cfg.nthread)
+        self.dt = self.backend.control_dt
+        self.generator = torch.Generator().manual_seed(cfg.seed)
+        layout = scene.layout
+        self.layout = layout
+        self.num_actions = len(layout.actuator_names)
+        emb = scene.embodiment
+        self.default_joint_pos = torch.tensor(emb.default_pos, dtype=torch.float32)
+        self.action_scale = torch.tensor(emb.action_scale, dtype=torch.float32)
+        lo, hi = scene.actuator_ctrlrange()
+        self.ctrl_low, self.ctrl_high = torch.tensor(lo, dtype=torch.float32), torch.tensor(hi, dtype=torch.float32)
+        self._setup_references(references)
+        self.reward_weights = {n: t.weight for n, t in cfg.rewards.items() if t is not None}
+        self.reward_funcs = {n: (reward_terms.REWARD_TERMS[t.func], t.params)
+                             for n, t in cfg.rewards.items() if t is not None}
+        self.max_episode_length = cfg.max_episode_frames
+        self.psi = PsiBuffer(cfg.psi, state_dim=layout.robot_nq + layout.robot_nv + 13, generator=self.generator)
+        if cfg.psi.enabled:  # the buffer starts with the reference-derived states (RSI), supp. E.2 (i)
+            frames = torch.cat([torch.arange(s, e) for s, e in zip(self.clip_start.tolist(), self.clip_end.tolist(), strict=True)])
+            self.psi.seed_from_reference(self._reference_states(frames), frames)
+        self._allocate()
+        self.reset()
+        self.obs_dims = {name: value.shape[1] for name, value in self._observations().items()}
+
+    # ---- setup --------------------------------------------------------------------------------------------------
+    def _setup_references(self, references: list[ReferenceMotion]) -> None:
+        if not references:
+            raise ValueError("the environment needs at least one reference motion")
+        cat = lambda name: torch.cat([getattr(r, name) for r in references])  # noqa: E731
+        self.reference = references[0] if len(references) == 1 else None
+        self.references = references
+        self.ref_link_pos, self.ref_link_quat = cat("link_pos"), cat("link_quat_wxyz")
+        self.ref_d_hat, self.ref_hand_contact = cat("d_hat"), cat("hand_contact")
+        self.ref_object_pos, self.ref_object_quat = cat("object_pos"), cat("object_quat_wxyz")
+        self.ref_object_lin_vel, self.ref_object_ang_vel = cat("object_lin_vel"), cat("object_ang_vel")
+        self.ref_robot_qpos, self.ref_robot_qvel = cat("robot_qpos"), cat("robot_qvel")
+        lengths = torch.tensor([r.num_frames for r in references])
+        self.clip_start = torch.cumsum(lengths, 0) - lengths
+        self.clip_end = self.clip_start + lengths - 1
+        self.object_points = references[0].object_points
+        wrists = [self.layout.link_names.index(n) for n in ("left_wrist_yaw_link", "right_wrist_yaw_link")]
+        self.ref_hand_distance = self.ref_d_hat[:, wrists].norm(dim=-1)
+        self.total_frames = int(lengths.sum())
+
+    def _allocate(self) -> None:
+        n, a = self.num_envs, self.num_actions
+        z = lambda *s, dtype=torch.float32: torch.zeros(*s, dtype=dtype)  # noqa: E731
+        self.actions, self.last_actions = z(n, a), z(n, a)
+        self.clip_id = z(n, dtype=torch.long)
+        self.ref_index = z(n, dtype=torch.long)
+        self.warmup_left = z(n, dtype=torch.long)
+        self.episode_length = z(n, dtype=torch.long)
+        self.contact_loss_frames = z(n, 2, dtype=torch.long)
+        self.prev_link_vel = z(n, self.layout.num_links, 3)
+        self.prev_object_vel = z(n, 3)
+        self.episode_sums: dict[str, Tensor] = {name: z(n) for name in self.reward_weights}
+        self.episode_error_h, self.episode_error_o = z(n), z(n)
+
+    # ---- VecEnv -------------------------------------------------------------------------------------------------
+    def reset(self) -> dict[str, Tensor]:
+        self._reset_envs(torch.arange(self.num_envs))
+        return self._observations()
+
+    def step(self, actions: Tensor):
+        self.actions = actions.detach().clamp(-self.cfg.action_clip, self.cfg.action_clip)
+        targets = self.default_joint_pos + self.action_scale * self.actions
+        self.backend.step(torch.maximum(torch.minimum(targets, self.ctrl_high), self.ctrl_low))
+        self.episode_length += 1
+        in_warmup = self.warmup_left > 0
+        self.warmup_left = (self.warmup_left - 1).clamp(min=0)
+        self.ref_index = torch.where(in_warmup, self.ref_index, torch.minimum(self.ref_index + 1, self._clip_end()))
+        self._update_state()
+
+        costs = {name: func(self, **params) for name, (func, params) in self.reward_funcs.items()}
+        reward, per_term = reward_terms.aggregate(costs, self.reward_weights)
+        for name, value in per_term.items():
+            self.episode_sums[name] += value
+        self._accumulate_metrics()
+
+        terminated = self._terminations()
+        reached_end = self.ref_index >= self._clip_end()
+        truncated = ~terminated & (reached_end | (self.episode_length >= self.max_episode_length))
+        self.psi.observe(self, reward, terminated | truncated)
+        done = terminated | truncated
+        extras = {"log": self._episode_log(done, terminated, reached_end)}
+        if truncated.any():
+            extras["final_obs"] = self._observations()
+        self.last_actions = self.actions.clone()
+        done_ids = done.nonzero().flatten()
+        if done_ids.numel():
+            self._reset_envs(done_ids)
+        return self._observations(), reward, terminated, truncated, extras
+
+    # ---- state --------------------------------------------------------------------------------------------------
+    def _clip_end(self) -> Tensor:
+        return self.clip_end[self.clip_id]
+
+    def _update_state(self) -> None:
+        lay = self.layout
+        qpos = self.backend.qpos.to(torch.float32)
+        qvel = self.backend.qvel.to(torch.float32)
+        sens = self.backend.sensordata.to(torch.float32)
+        n, nl = self.num_envs, lay.num_links
+        self.root_pos, self.root_quat = qpos[:, 0:3], qpos[:, 3:7]
+        self.root_lin_vel, self.root_ang_vel = qvel[:, 0:3], qvel[:, 3:6]
+        self.joint_pos = qpos[:, lay.actuator_qpos]
+        self.joint_vel = qvel[:, lay.actuator_dof]
+        self.object_pos = qpos[:, lay.object_qpos:lay.object_qpos + 3]
+        self.object_quat = qpos[:, lay.object_qpos + 3:lay.object_qpos + 7]
+        self.object_lin_vel = qvel[:, lay.object_dof:lay.object_dof + 3]
+        # free-joint angular velocity is in the body frame; the observation wants it in world axes
+        self.object_ang_vel = quat_apply(self.object_quat, qvel[:, lay.object_dof + 3:lay.object_dof + 6])
+        self.link_pos = sens[:, lay.link_pos].reshape(n, nl, 3)
+        self.link_quat = sens[:, lay.link_quat].reshape(n, nl, 4)
+        self.link_vel = sens[:, lay.link_vel].reshape(n, nl, 3)
+        contact = sens[:, lay.contact].reshape(n, -1, 4)
+        self.contact_found = contact[..., 0] > 0
+        self.contact_force = contact[..., 1:]
+        self.hand_contact_found = self.contact_found[:, self.scene.hand_contact_ids]
+        self.finger_contact_found = self.contact_found[:, self.scene.finger_contact_ids]
+        self.link_acc = (self.link_vel - self.prev_link_vel) / self.dt
+        self.object_acc = (self.object_lin_vel - self.prev_object_vel) / self.dt
+        self.prev_link_vel, self.prev_object_vel = self.link_vel, self.object_lin_vel
+
+        self.object_points_world = quat_apply(self.object_quat[:, None], self.object_points[None]) + \
+            self.object_pos[:, None]
+        self.d = nearest_surface_vectors(self.link_pos, self.object_points_world)
+        self.ref = self.reference_at(0)
+        self.ref_object_points_world = quat_apply(self.ref.object_quat_wxyz[:, None], self.object_points[None]) + \
+            self.ref.object_pos[:, None]
+        self.w_d = reward_terms.interaction_weights(self.d, self.ref.d_hat)
+        need = self.ref.hand_contact & (self.warmup_left == 0)[:, None]
+        self.contact_loss_frames = torch.where(need & ~self.hand_contact_found, self.contact_loss_frames + 1, 0)
+
+    def reference_at(self, k: int) -> ReferenceFrame:
+        idx = torch.minimum(self.ref_index + k, self._clip_end()) if k else self.ref_index
+        return ReferenceFrame(
+            link_pos=self.ref_link_pos[idx], link_quat_wxyz=self.ref_link_quat[idx], d_hat=self.ref_d_hat[idx],
+            object_pos=self.ref_object_pos[idx], object_quat_wxyz=self.ref_object_quat[idx],
+            hand_contact=self.ref_hand_contact[idx], hand_distance=self.ref_hand_distance[idx],
+        )
+
+    def _terminations(self) -> Tensor:
+        t = self.cfg.terminations
+        done = term_terms.link_deviation(self, t.max_mean_link_error)
+        done |= term_terms.root_too_low(self, t.min_root_height)
+        done |= term_terms.object_deviation(self, t.max_mean_object_point_error)
+        done |= term_terms.interaction_distance_deviation(self, t.max_interaction_distance_error)
+        done |= term_terms.contact_lost(self, t.max_contact_loss_frames)
+        return done
+
+    # ---- metrics ------------------------------------------------------------------------------------------------
+    def _accumulate_metrics(self) -> None:
+        body = self.scene.body_link_ids  # E_h excludes hand joints for OMOMO (InterMimic Sec. 4)
+        self.episode_error_h += (self.ref.link_pos[:, body] - self.link_pos[:, body]).norm(dim=-1).mean(-1)
+        self.episode_error_o += (self.object_points_world - self.ref_object_points_world).norm(dim=-1).mean(-1)
+
+    def _episode_log(self, done: Tensor, terminated: Tensor, reached_end: Tensor) -> dict[str, float]:
+        if not done.any():
+            return {}
+        steps = self.episode_length[done].clamp(min=1).float()
+        log = {f"Episode_Reward/{name}": (s[done] / steps).mean().item() for name, s in self.episode_sums.items()}
+        log["Metrics/episode_length"] = steps.mean().item()
+        log["Metrics/success"] = (reached_end[done] & ~terminated[done]).float().mean().item()
+        log["Metrics/E_h_cm"] = (100 * self.episode_error_h[done] / steps).mean().item()
+        log["Metrics/E_o_cm"] = (100 * self.episode_error_o[done] / steps).mean().item()
+        log["Metrics/psi_buffer"] = float(len(self.psi))
+        return log
+
+    # ---- resets -------------------------------------------------------------------------------------------------
+    def _reset_envs(self, env_ids: Tensor) -> None:
+        n = env_ids.numel()
+        init = self.cfg.init
+        clip = torch.randint(len(self.references), (n,), generator=self.generator)
+        stand = torch.rand(n, generator=self.generator) < init.stand_start_probability
+        frame = self.clip_start[clip].clone()
+        robot_state = torch.zeros(n, self.layout.robot_nq + self.layout.robot_nv)
+        object_state = torch.zeros(n, 13)
+
+        # reference/physical state initialisation for the others
+        others = (~stand).nonzero().flatten()
+        if others.numel():
+            states, frames = self.psi.sample(others.numel()) if self.psi.ready() else (None, None)
+            if states is None:
+                frames = self._random_frames(clip[others])
+                states = self._reference_states(frames)
+            robot_state[others] = states[:, : robot_state.shape[1]]
+            object_state[others] = states[:, robot_state.shape[1]:]
+            frame[others] = frames
+            clip[others] = torch.bucketize(frames, self.clip_end)
+        stand_ids = stand.nonzero().flatten()
+        if stand_ids.numel():
+            robot_state[stand_ids], object_state[stand_ids] = self._stand_states(frame[stand_ids])
+
+        qpos = torch.cat([robot_state[:, : self.layout.robot_nq], object_state[:, :7]], dim=1)
+        # PSI/reference states keep the object's angular velocity in world axes; MuJoCo's free joint wants body axes
+        object_ang_local = quat_apply_inverse(object_state[:, 3:7], object_state[:, 10:13])
+        qvel = torch.cat([robot_state[:, self.layout.robot_nq:], object_state[:, 7:10], object_ang_local], dim=1)
+        self.backend.set_state(env_ids, qpos.to(torch.float64), qvel.to(torch.float64))
+        self.clip_id[env_ids] = clip
+        self.ref_index[env_ids] = frame
+        self.warmup_left[env_ids] = torch.where(stand, self.cfg.warmup_frames, 0)
+        self.episode_length[env_ids] = 0
+        self.contact_loss_frames[env_ids] = 0
+        self.last_actions[env_ids] = 0.0
+        for s in self.episode_sums.values():
+            s[env_ids] = 0.0
+        self.episode_error_h[env_ids] = 0.0
+        self.episode_error_o[env_ids] = 0.0
+        self._update_state()
+        self.prev_link_vel[env_ids] = self.link_vel[env_ids]
+        self.prev_object_vel[env_ids] = self.object_lin_vel[env_ids]
+        self.psi.on_reset(env_ids)
+
+    def _random_frames(self, clip: Tensor) -> Tensor:
+        span = (self.clip_end[clip] - self.clip_start[clip]).float()
+        return self.clip_start[clip] + (torch.rand(clip.numel(), generator=self.generator) * span).long()
+
+    def _reference_states(self, frames: Tensor) -> Tensor:
+        """Robot + object states of the IK reference at `frames`, with joint noise (RSI)."""
+        qpos = self.ref_robot_qpos[frames].clone()
+        qpos[:, 7:] += self.cfg.init.joint_noise * torch.randn(qpos[:, 7:].shape, generator=self.generator)
+        qvel = self.ref_robot_qvel[frames]
+        obj = torch.cat([self.ref_object_pos[frames], self.ref_object_quat[frames],
+                         self.ref_object_lin_vel[frames],
+                         self.ref_object_ang_vel[frames]], dim=1)
+        return torch.cat([qpos, qvel, obj], dim=1)
+
+    def _stand_states(self, frames: Tensor) -> tuple[Tensor, Tensor]:
+        """Default standing robot at the reference root's place and heading, object at its reference pose."""
+        n = frames.numel()
+        lay = self.layout
+        qpos = self.scene.default_robot_qpos().repeat(n, 1)
+        ref_root = self.ref_robot_qpos[frames]
+        noise = self.cfg.init.spawn_noise_xy * (2 * torch.rand(n, 2, generator=self.generator) - 1)
+        qpos[:, 0:2] = ref_root[:, 0:2] + noise
+        qpos[:, 3:7] = quat_mul(yaw_quat(ref_root[:, 3:7]), qpos[:, 3:7])
+        robot = torch.cat([qpos, torch.zeros(n, lay.robot_nv)], dim=1)
+        obj = torch.cat([self.ref_object_pos[frames], self.ref_object_quat[frames], torch.zeros(n, 6)], dim=1)
+        return robot, obj
+
+    def current_states(self) -> Tensor:
+        """Robot + object states of every env, in the PSI buffer layout."""
+        lay = self.layout
+        qpos, qvel = self.backend.qpos.to(torch.float32), self.backend.qvel.to(torch.float32)
+        obj_v = qvel[:, lay.object_dof:lay.object_dof + 6].clone()
+        obj_v[:, 3:] = quat_apply(self.object_quat, obj_v[:, 3:])  # store world-frame angular velocity
+        return torch.cat([qpos[:, : lay.robot_nq], qvel[:, : lay.robot_nv],
+                          qpos[:, lay.object_qpos:lay.object_qpos + 7], obj_v], dim=1)
+
+    # ---- observations -------------------------------------------------------------------------------------------
+    def _observations(self) -> dict[str, Tensor]:
+        policy = obs_terms.teacher_observation(self)
+        return {"policy": policy, "critic": torch.cat([policy, obs_terms.critic_extras(self)], dim=-1)}

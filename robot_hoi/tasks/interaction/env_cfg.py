@@ -1,0 +1,86 @@
+"""Configuration of the interaction-imitation environment (InterMimic Sec. 3.1-3.2, supp. D-F).
+
+Mapped from configs/tasks/interaction.yaml. A reward term set to `null` is disabled. Reward weights are the
+lambdas of supp. F; the total reward is exp(-sum_i lambda_i * E_i) (multiplicative exp aggregation, supp. D.5).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+
+@dataclass
+class RewardTermCfg:
+    func: str                      # name in mdp.rewards.REWARD_TERMS
+    weight: float                  # lambda of exp(-lambda * E)
+    params: dict[str, float] = field(default_factory=dict)
+
+
+def _default_rewards() -> dict[str, RewardTermCfg | None]:
+    # InterMimic supp. F: (lp_h, lth_h, l_d, lp_o, lth_o, l_cb, l_cp, l_ch, le_h, le_o, le_f)
+    #                   = (30, 2.5, 5, 0.1, 5, 5, 5, 3, 2e-5, 2e-5, 1e-9)
+    return {
+        "link_pos": RewardTermCfg("link_position_cost", 30.0),
+        "link_rot": RewardTermCfg("link_rotation_cost", 2.5),
+        "interaction": RewardTermCfg("interaction_geometry_cost", 5.0),
+        "object_pos": RewardTermCfg("object_position_cost", 0.1),
+        "object_rot": RewardTermCfg("object_rotation_cost", 5.0),
+        "energy_links": RewardTermCfg("link_acceleration_cost", 2e-5),
+        "energy_object": RewardTermCfg("object_acceleration_cost", 2e-5),
+        "energy_contact": RewardTermCfg("contact_force_cost", 1e-9),
+        # Contact rewards exist but are off for the robot (self-collision is off; supp. F).
+        "contact_promote": None,
+        "contact_penalty": None,
+        "hand_contact": None,
+    }
+
+
+@dataclass
+class TerminationCfg:
+    """Early termination (supp. E.1) + interaction early termination (Sec. 3.2), thresholds as written."""
+
+    max_mean_link_error: float = 0.5        # m, joints on average further than this from their reference
+    min_root_height: float = 0.15           # m
+    max_mean_object_point_error: float = 0.5  # m, object points deviate on average
+    max_interaction_distance_error: float = 0.5  # m, weighted link-to-object distance vs the reference
+    max_contact_loss_frames: int = 10       # required body-object contact lost for more than this many frames
+
+
+@dataclass
+class PsiCfg:
+    """Physical State Initialization (supp. E.2)."""
+
+    enabled: bool = True
+    buffer_size: int = 4096
+    update_probability: float = 0.005   # sparse: chance per finished rollout to write into the buffer
+    return_threshold: float = 0.5       # admitted when the discounted return per step exceeds this
+    sample_probability: float = 0.5     # share of non-stand resets drawn from the buffer once it has states
+
+
+@dataclass
+class InitCfg:
+    stand_start_probability: float = 0.3   # start at clip frame 0 from the default stand (with warmup)
+    spawn_noise_xy: float = 0.05           # m, stand start placement noise
+    joint_noise: float = 0.05              # rad, reference-state initialisation noise
+
+
+@dataclass
+class InteractionEnvCfg:
+    embodiment: str = "g1_inspire"
+    num_envs: int = 64
+    backend: str = "cpu"
+    nthread: int | None = None
+    seed: int = 0
+    keyframes: tuple[int, ...] = (1, 16)    # teacher keyframes K (Sec. 4)
+    warmup_frames: int = 15                 # stand-and-approach frames (supp. F)
+    max_episode_frames: int = 300           # supp. Table C
+    object_density: float = 200.0           # kg/m^3 (supp. Table A)
+    object_friction: float = 0.9            # supp. Table A
+    object_surface_points: int = 256        # samples for d_t
+    self_collision: bool = False
+    action_clip: float = 4.0
+    rewards: dict[str, RewardTermCfg | None] = field(default_factory=_default_rewards)
+    terminations: TerminationCfg = field(default_factory=TerminationCfg)
+    init: InitCfg = field(default_factory=InitCfg)
+    psi: PsiCfg = field(default_factory=PsiCfg)
+    success_min_frames_fraction: float = 0.95  # success = tracked to (almost) the end without termination

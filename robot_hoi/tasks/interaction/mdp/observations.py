@@ -1,0 +1,141 @@
+"""Observation terms (InterMimic Eq. 1), expressed in the robot's heading frame (yaw of the pelvis) relative to
+the pelvis position. Each returns (num_envs, size).
+
+Self state s^s: proprioception, object state, d_t (link -> nearest object surface point) and contact flags c_t.
+Goal state s^g for each keyframe k: differences to the reference at t+k and the absolute reference values.
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import Tensor
+
+from robot_hoi.utils.torch_rot import (
+    quat_apply_inverse,
+    quat_conj,
+    quat_mul,
+    quat_to_tan_norm,
+    yaw_quat,
+)
+
+
+def _heading(env) -> Tensor:
+    return yaw_quat(env.root_quat)
+
+
+def _to_heading(env, vec: Tensor) -> Tensor:
+    """World vectors (N, ..., 3) into the heading frame."""
+    heading = _heading(env)
+    shape = (heading.shape[0],) + (1,) * (vec.dim() - 2) + (4,)
+    return quat_apply_inverse(heading.reshape(shape), vec)
+
+
+def _rot_in_heading(env, quat: Tensor) -> Tensor:
+    heading = _heading(env)
+    shape = (heading.shape[0],) + (1,) * (quat.dim() - 2) + (4,)
+    return quat_to_tan_norm(quat_mul(quat_conj(heading.reshape(shape)).expand_as(quat), quat))
+
+
+def _flat(x: Tensor) -> Tensor:
+    return x.reshape(x.shape[0], -1)
+
+
+# ---- self state ------------------------------------------------------------------------------------------------
+def root_height(env) -> Tensor:
+    return env.root_pos[:, 2:3]
+
+
+def root_rotation(env) -> Tensor:
+    return _rot_in_heading(env, env.root_quat)
+
+
+def root_linear_velocity(env) -> Tensor:
+    return _to_heading(env, env.root_lin_vel)
+
+
+def root_angular_velocity(env) -> Tensor:
+    return env.root_ang_vel  # pelvis frame, as an IMU gyro reports it
+
+
+def joint_positions(env) -> Tensor:
+    return env.joint_pos - env.default_joint_pos
+
+
+def joint_velocities(env, scale: float = 0.1) -> Tensor:
+    return scale * env.joint_vel
+
+
+def link_positions(env) -> Tensor:
+    return _flat(_to_heading(env, env.link_pos - env.root_pos[:, None]))
+
+
+def link_rotations(env) -> Tensor:
+    return _flat(_rot_in_heading(env, env.link_quat))
+
+
+def link_velocities(env, scale: float = 0.1) -> Tensor:
+    return scale * _flat(_to_heading(env, env.link_vel))
+
+
+def object_state(env) -> Tensor:
+    return torch.cat([
+        _to_heading(env, env.object_pos - env.root_pos),
+        _rot_in_heading(env, env.object_quat),
+        _to_heading(env, env.object_lin_vel),
+        _to_heading(env, env.object_ang_vel),
+    ], dim=-1)
+
+
+def surface_vectors(env) -> Tensor:
+    return _flat(_to_heading(env, env.d))
+
+
+def contact_flags(env) -> Tensor:
+    return env.contact_found.float()
+
+
+def last_action(env) -> Tensor:
+    return env.last_actions
+
+
+def warmup_phase(env) -> Tensor:
+    return (env.warmup_left.float() / max(env.cfg.warmup_frames, 1))[:, None]
+
+
+# ---- goal state, one block per keyframe ---------------------------------------------------------------------------
+def reference_goal(env, k: int) -> Tensor:
+    """s^g_{t,t+k}: differences to the reference at t+k and the reference's absolute values (heading frame)."""
+    ref = env.reference_at(k)
+    link_rot_diff = quat_to_tan_norm(quat_mul(quat_conj(env.link_quat), ref.link_quat_wxyz))
+    obj_rot_diff = quat_to_tan_norm(quat_mul(quat_conj(env.object_quat), ref.object_quat_wxyz))
+    return torch.cat([
+        _flat(link_rot_diff),
+        _flat(_to_heading(env, ref.link_pos - env.link_pos)),
+        obj_rot_diff,
+        _to_heading(env, ref.object_pos - env.object_pos),
+        _flat(_to_heading(env, ref.d_hat - env.d)),
+        ref.hand_contact.float() - env.hand_contact_found.float(),
+        _flat(_rot_in_heading(env, ref.link_quat_wxyz)),
+        _flat(_to_heading(env, ref.link_pos - env.root_pos[:, None])),
+        _rot_in_heading(env, ref.object_quat_wxyz),
+        _to_heading(env, ref.object_pos - env.root_pos),
+    ], dim=-1)
+
+
+SELF_TERMS = (
+    root_height, root_rotation, root_linear_velocity, root_angular_velocity, joint_positions, joint_velocities,
+    link_positions, link_rotations, link_velocities, object_state, surface_vectors, contact_flags, last_action,
+    warmup_phase,
+)
+
+
+def teacher_observation(env) -> Tensor:
+    parts = [term(env) for term in SELF_TERMS]
+    parts += [reference_goal(env, k) for k in env.cfg.keyframes]
+    return torch.cat(parts, dim=-1)
+
+
+def critic_extras(env) -> Tensor:
+    """Privileged extras for the critic: clip phase and contact forces."""
+    phase = (env.ref_index.float() / max(env.reference.num_frames - 1, 1))[:, None]
+    return torch.cat([phase, 0.01 * _flat(env.contact_force)], dim=-1)

@@ -1,0 +1,90 @@
+"""Physical State Initialization (InterMimic Sec. 3.2, supp. E.2).
+
+A FIFO buffer of initial states: it starts with reference-derived states (the IK retarget, i.e. RSI) and admits
+simulated states whose discounted return over the following `horizon` steps, per step, exceeds a threshold.
+Candidates are taken sparsely: each env starts tracking a candidate with probability `update_probability` per
+step (the paper's 0.005 per rollout), so the buffer refreshes slowly and stays cheap.
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import Tensor
+
+from robot_hoi.tasks.interaction.env_cfg import PsiCfg
+
+
+class PsiBuffer:
+    def __init__(self, cfg: PsiCfg, state_dim: int, generator: torch.Generator, gamma: float = 0.99,
+                 horizon: int = 32):
+        self.cfg = cfg
+        self.gamma = gamma
+        self.horizon = horizon
+        self.generator = generator
+        self.states = torch.zeros(cfg.buffer_size, state_dim)
+        self.frames = torch.zeros(cfg.buffer_size, dtype=torch.long)
+        self.size = 0
+        self.head = 0
+        self.admitted = 0
+        self._cand_state: Tensor | None = None
+
+    def __len__(self) -> int:
+        return self.size
+
+    def ready(self) -> bool:
+        return self.cfg.enabled and self.size > 0 and bool(
+            torch.rand(1, generator=self.generator).item() < self.cfg.sample_probability)
+
+    def push(self, states: Tensor, frames: Tensor) -> None:
+        """FIFO insert: the oldest states are overwritten first."""
+        n = states.shape[0]
+        if n == 0:
+            return
+        idx = (self.head + torch.arange(n)) % self.cfg.buffer_size
+        self.states[idx], self.frames[idx] = states, frames
+        self.head = int((self.head + n) % self.cfg.buffer_size)
+        self.size = min(self.size + n, self.cfg.buffer_size)
+
+    def sample(self, n: int) -> tuple[Tensor, Tensor]:
+        idx = torch.randint(self.size, (n,), generator=self.generator)
+        return self.states[idx].clone(), self.frames[idx].clone()
+
+    def seed_from_reference(self, states: Tensor, frames: Tensor) -> None:
+        self.push(states[-self.cfg.buffer_size:], frames[-self.cfg.buffer_size:])
+
+    # ---- candidate tracking, called by the env every step ----------------------------------------------------------
+    def _ensure(self, env) -> None:
+        if self._cand_state is None:
+            n = env.num_envs
+            self._cand_state = torch.zeros(n, self.states.shape[1])
+            self._cand_frame = torch.zeros(n, dtype=torch.long)
+            self._cand_return = torch.zeros(n)
+            self._cand_steps = torch.zeros(n, dtype=torch.long)
+            self._cand_active = torch.zeros(n, dtype=torch.bool)
+
+    def observe(self, env, reward: Tensor, done: Tensor) -> None:
+        if not self.cfg.enabled:
+            return
+        self._ensure(env)
+        active = self._cand_active
+        self._cand_return += torch.where(active, reward * self.gamma ** self._cand_steps.float(), 0.0)
+        self._cand_steps += active.long()
+        finished = active & (self._cand_steps >= self.horizon) & ~done
+        if finished.any():
+            norm = (1 - self.gamma ** self.horizon) / (1 - self.gamma)
+            good = finished & (self._cand_return / norm > self.cfg.return_threshold)
+            self.push(self._cand_state[good], self._cand_frame[good])
+            self.admitted += int(good.sum())
+        self._cand_active &= ~(finished | done)
+        start = ~self._cand_active & ~done & (env.warmup_left == 0) & (
+            torch.rand(env.num_envs, generator=self.generator) < self.cfg.update_probability)
+        if start.any():
+            self._cand_state[start] = env.current_states()[start]
+            self._cand_frame[start] = env.ref_index[start]
+            self._cand_return[start] = 0.0
+            self._cand_steps[start] = 0
+            self._cand_active |= start
+
+    def on_reset(self, env_ids: Tensor) -> None:
+        if self._cand_state is not None:
+            self._cand_active[env_ids] = False

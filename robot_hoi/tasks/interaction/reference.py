@@ -1,0 +1,111 @@
+"""Reference motion tensors the interaction environment tracks, in robot space.
+
+Built from a clip by the retarget module (robot_hoi.retarget): the link targets are the scaled human reference,
+object-anchored near the object (the documented human->robot mapping lives in robot_hoi.retarget.targets), the link
+orientations, joint angles and full states come from the kinematic IK retarget of the same targets. The env uses
+link positions/orientations for rewards and goals, the IK states for reference-state initialisation.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+import numpy as np
+import torch
+from torch import Tensor
+
+
+@dataclass
+class ReferenceMotion:
+    fps: float
+    link_pos: Tensor            # (T, L, 3) world targets of the mapped links
+    link_quat_wxyz: Tensor      # (T, L, 4) orientations of the retargeted robot links
+    robot_qpos: Tensor          # (T, robot_nq) IK state: root pos, root quat wxyz, every robot joint
+    robot_qvel: Tensor          # (T, robot_nv)
+    joint_pos: Tensor           # (T, A) actuated joints, actuator order
+    object_pos: Tensor          # (T, 3)
+    object_quat_wxyz: Tensor    # (T, 4)
+    object_lin_vel: Tensor      # (T, 3)
+    object_ang_vel: Tensor      # (T, 3) world frame
+    hand_contact: Tensor        # (T, 2) bool: left / right hand must touch the object (reference markers)
+    object_points: Tensor       # (P, 3) surface samples in the object frame
+    d_hat: Tensor               # (T, L, 3) vectors from each reference link to its nearest object surface point
+    name: str = "clip"
+
+    @property
+    def num_frames(self) -> int:
+        return self.link_pos.shape[0]
+
+    def to(self, device: torch.device | str) -> ReferenceMotion:
+        kw = {f.name: getattr(self, f.name) for f in fields(self)}
+        return ReferenceMotion(**{k: (v.to(device) if isinstance(v, Tensor) else v) for k, v in kw.items()})
+
+
+def nearest_surface_vectors(link_pos: Tensor, points_world: Tensor) -> Tensor:
+    """Vectors from each link to its nearest object surface sample: (..., L, 3) and (..., P, 3) -> (..., L, 3)."""
+    diff = points_world.unsqueeze(-3) - link_pos.unsqueeze(-2)          # (..., L, P, 3)
+    idx = diff.square().sum(-1).argmin(-1)                                # (..., L)
+    return torch.gather(diff, -2, idx[..., None, None].expand(*idx.shape, 1, 3)).squeeze(-2)
+
+
+def finite_difference(x: np.ndarray, fps: float) -> np.ndarray:
+    return np.gradient(x, 1.0 / fps, axis=0)
+
+
+def angular_velocity_wxyz(quat_wxyz: np.ndarray, fps: float) -> np.ndarray:
+    """World-frame angular velocity of a quaternion track (T, 4) by central differences."""
+    from scipy.spatial.transform import Rotation
+
+    rot = Rotation.from_quat(quat_wxyz[:, [1, 2, 3, 0]])
+    omega = np.zeros((len(quat_wxyz), 3))
+    if len(quat_wxyz) > 1:
+        delta = (rot[1:] * rot[:-1].inv()).as_rotvec() * fps
+        omega[1:-1] = 0.5 * (delta[1:] + delta[:-1])
+        omega[0], omega[-1] = delta[0], delta[-1]
+    return omega
+
+
+def build_reference(clip, motion) -> ReferenceMotion:
+    """ReferenceMotion from an HOIClip and its robot-space IK retarget (robot_hoi.retarget.RobotMotion).
+
+    Link position targets are the retarget's targets (scaled human, object-anchored near the object); link
+    orientations and full robot states come from the IK solution; the object track is the robot-space one.
+    """
+    from robot_hoi.utils.torch_rot import quat_apply
+
+    fps = float(motion.fps)
+    t = lambda a: torch.as_tensor(np.asarray(a), dtype=torch.float32)  # noqa: E731
+    object_pos = np.asarray(motion.object_pos, dtype=np.float64)
+    object_quat = np.asarray(motion.object_quat_wxyz, dtype=np.float64)
+    points = t(clip.object.sample_points)
+    obj_q = t(object_quat)
+    points_world = quat_apply(obj_q[:, None, :], points[None]) + t(object_pos)[:, None, :]
+    link_pos = t(motion.target_pos)
+    return ReferenceMotion(
+        fps=fps,
+        link_pos=link_pos,
+        link_quat_wxyz=t(motion.link_quat_wxyz),
+        robot_qpos=t(motion.qpos),
+        robot_qvel=t(motion.qvel),
+        joint_pos=t(motion.joint_pos),
+        object_pos=t(object_pos),
+        object_quat_wxyz=obj_q,
+        object_lin_vel=t(finite_difference(object_pos, fps)),
+        object_ang_vel=t(angular_velocity_wxyz(object_quat, fps)),
+        hand_contact=torch.as_tensor(_hand_contact_markers(clip, len(link_pos))),
+        object_points=points,
+        d_hat=nearest_surface_vectors(link_pos, points_world),
+        name=clip.name,
+    )
+
+
+def _hand_contact_markers(clip, num_frames: int) -> np.ndarray:
+    """Required hand contact per frame: any body of that hand (wrist + fingers) labelled +1 in the clip."""
+    from robot_hoi.data.layout import BODY_NAMES
+
+    labels = np.asarray(clip.body_contact)[:num_frames]
+    left = [i for i, n in enumerate(BODY_NAMES) if n.startswith("L_") and ("Wrist" in n or n[2:-1] in
+            ("Index", "Middle", "Ring", "Pinky", "Thumb"))]
+    right = [i for i, n in enumerate(BODY_NAMES) if n.startswith("R_") and ("Wrist" in n or n[2:-1] in
+             ("Index", "Middle", "Ring", "Pinky", "Thumb"))]
+    return np.stack([(labels[:, left] > 0).any(1), (labels[:, right] > 0).any(1)], axis=1)
