@@ -125,7 +125,8 @@ class InteractionEnv:
         truncated = ~terminated & (reached_end | (self.episode_length >= self.max_episode_length))
         self.psi.observe(self, reward, terminated | truncated)
         done = terminated | truncated
-        extras = {"log": self._episode_log(done, terminated, reached_end)}
+        stats = self._episode_stats(done, terminated, reached_end)
+        extras = {"log": self._episode_log(done, stats), "episode": stats}
         if truncated.any():
             extras["final_obs"] = self._observations()
         self.last_actions = self.actions.clone()
@@ -198,15 +199,25 @@ class InteractionEnv:
         self.episode_error_h += (self.ref.link_pos[:, body] - self.link_pos[:, body]).norm(dim=-1).mean(-1)
         self.episode_error_o += (self.object_points_world - self.ref_object_points_world).norm(dim=-1).mean(-1)
 
-    def _episode_log(self, done: Tensor, terminated: Tensor, reached_end: Tensor) -> dict[str, float]:
+    def _episode_stats(self, done: Tensor, terminated: Tensor, reached_end: Tensor) -> dict[str, Tensor]:
+        """Per finished episode: InterMimic's success, duration (s), E_h and E_o (cm, averaged over the episode)."""
+        steps = self.episode_length[done].clamp(min=1).float()
+        return {
+            "success": (reached_end[done] & ~terminated[done]).float(),
+            "duration_s": steps * self.dt,
+            "E_h_cm": 100 * self.episode_error_h[done] / steps,
+            "E_o_cm": 100 * self.episode_error_o[done] / steps,
+            "clip_id": self.clip_id[done].float(),
+        }
+
+    def _episode_log(self, done: Tensor, stats: dict[str, Tensor]) -> dict[str, float]:
         if not done.any():
             return {}
         steps = self.episode_length[done].clamp(min=1).float()
         log = {f"Episode_Reward/{name}": (s[done] / steps).mean().item() for name, s in self.episode_sums.items()}
         log["Metrics/episode_length"] = steps.mean().item()
-        log["Metrics/success"] = (reached_end[done] & ~terminated[done]).float().mean().item()
-        log["Metrics/E_h_cm"] = (100 * self.episode_error_h[done] / steps).mean().item()
-        log["Metrics/E_o_cm"] = (100 * self.episode_error_o[done] / steps).mean().item()
+        for key in ("success", "duration_s", "E_h_cm", "E_o_cm"):
+            log[f"Metrics/{key}"] = stats[key].mean().item()
         log["Metrics/psi_buffer"] = float(len(self.psi))
         return log
 

@@ -1,0 +1,138 @@
+"""`robot-hoi eval`: InterMimic's metrics for a teacher checkpoint (or an untrained baseline), per clip.
+
+Every episode starts from the default stand at the clip's start (with the 15-frame approach warmup), actions are
+the policy mean, and an episode ends at the clip's end or at an (interaction) early termination. Metrics:
+success rate, duration (s) until termination, E_h (cm, mean mapped-link position error excluding the hands) and
+E_o (cm, mean object surface-point error), both averaged over the imitated duration.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from robot_hoi.paths import CONFIGS_DIR
+
+TASK_CONFIG = CONFIGS_DIR / "tasks" / "interaction.yaml"
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser("eval", help="evaluate a checkpoint: success, duration, E_h, E_o per clip",
+                              description=__doc__)
+    p.add_argument("checkpoint", help="a model_*.pt from `robot-hoi train`, or `untrained` for a baseline")
+    p.add_argument("--data", nargs="*", default=None, help="clips (default: the ones the checkpoint trained on)")
+    p.add_argument("--embodiment", default="g1_inspire")
+    p.add_argument("--episodes", type=int, default=8, help="episodes per clip (run in parallel)")
+    p.add_argument("--preset", default="fast", choices=["fast", "paper"], help="network for `untrained`")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--json", action="store_true", help="machine-readable output")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    import torch
+
+    from robot_hoi.embodiment import load_embodiment
+    from robot_hoi.rl.checkpoint import load_policy
+    from robot_hoi.rl.cli import PRESETS
+    from robot_hoi.rl.config import load_train_config
+    from robot_hoi.rl.models import ActorCritic
+    from robot_hoi.tasks.interaction import factory
+    from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg
+    from robot_hoi.utils.config import load_dataclass, load_yaml_dataclass
+
+    if args.checkpoint == "untrained":
+        env_cfg = load_yaml_dataclass(InteractionEnvCfg, TASK_CONFIG)
+        sources = factory.expand_sources(args.data)
+        model = None
+    else:
+        ckpt = Path(args.checkpoint)
+        if not ckpt.is_file():
+            from robot_hoi.errors import UserError
+
+            raise UserError(f"{ckpt}: no such checkpoint")
+        model, _, _ = load_policy(ckpt)
+        task = factory.read_task(ckpt) if args.data is None else None
+        env_cfg = load_dataclass(InteractionEnvCfg, task["env"], f"{ckpt} task") if task else \
+            load_yaml_dataclass(InteractionEnvCfg, TASK_CONFIG)
+        sources = task["sources"] if task else factory.expand_sources(args.data)
+    embodiment = load_embodiment(args.embodiment)
+    _evaluation_settings(env_cfg, args)
+
+    results = {}
+    for source in sources:
+        clip = factory.load_source(source)
+        env = factory.make_env([clip], env_cfg, embodiment)
+        if model is None:
+            torch.manual_seed(args.seed)
+            train_cfg = load_train_config(PRESETS[args.preset])
+            model = ActorCritic(env.obs_dims["policy"], env.obs_dims["critic"], env.num_actions, train_cfg.model)
+            model.eval()
+        results[clip.name] = evaluate(env, model)
+    summary = _summarise(results)
+    if args.json:
+        print(json.dumps({"checkpoint": args.checkpoint, "clips": results, "mean": summary}, indent=2))
+    else:
+        _print_table(args.checkpoint, results, summary)
+    return 0
+
+
+def _evaluation_settings(env_cfg, args) -> None:
+    env_cfg.num_envs = args.episodes
+    env_cfg.seed = args.seed
+    env_cfg.init.stand_start_probability = 1.0
+    env_cfg.init.spawn_noise_xy = 0.0
+    env_cfg.psi.enabled = False
+
+
+def evaluate(env, model) -> dict[str, float]:
+    """Run each env until its first episode ends; average InterMimic's metrics over those episodes."""
+    import torch
+
+    obs = env.reset()
+    finished: dict[str, list[torch.Tensor]] = {}
+    counted = torch.zeros(env.num_envs, dtype=torch.bool)
+    with torch.no_grad():
+        for _ in range(env.max_episode_length + env.cfg.warmup_frames + 2):
+            actions = model.act_inference(obs["policy"])
+            obs, _, terminated, truncated, extras = env.step(actions)
+            done = terminated | truncated
+            new = done & ~counted
+            if new.any():
+                keep = new[done]  # rows of extras["episode"] that belong to first episodes
+                for key, value in extras["episode"].items():
+                    finished.setdefault(key, []).append(value[keep])
+                counted |= new
+            if counted.all():
+                break
+    stats = {k: torch.cat(v) for k, v in finished.items()}
+    return {
+        "episodes": int(counted.sum()),
+        "success_rate": stats["success"].mean().item(),
+        "duration_s": stats["duration_s"].mean().item(),
+        "E_h_cm": stats["E_h_cm"].mean().item(),
+        "E_o_cm": stats["E_o_cm"].mean().item(),
+        "clip_duration_s": env.total_frames / env.references[0].fps,
+    }
+
+
+def _summarise(results: dict[str, dict[str, float]]) -> dict[str, float]:
+    keys = ("success_rate", "duration_s", "E_h_cm", "E_o_cm")
+    return {k: sum(r[k] for r in results.values()) / max(len(results), 1) for k in keys}
+
+
+def _print_table(name: str, results, summary) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    table = Table(title=f"robot-hoi eval: {name}")
+    for col in ("clip", "episodes", "success", "duration (s)", "E_h (cm)", "E_o (cm)"):
+        table.add_column(col, justify="right" if col != "clip" else "left")
+    for clip, r in results.items():
+        table.add_row(clip, str(r["episodes"]), f"{r['success_rate']:.2f}",
+                      f"{r['duration_s']:.2f} / {r['clip_duration_s']:.2f}", f"{r['E_h_cm']:.1f}",
+                      f"{r['E_o_cm']:.1f}")
+    table.add_row("mean", "", f"{summary['success_rate']:.2f}", f"{summary['duration_s']:.2f}",
+                  f"{summary['E_h_cm']:.1f}", f"{summary['E_o_cm']:.1f}")
+    Console().print(table)

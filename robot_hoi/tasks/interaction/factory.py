@@ -1,0 +1,120 @@
+"""From user inputs to environments: load clips, group them into teachers, retarget, build the env.
+
+Clip sources are recorded as strings so a run can be rebuilt later: a file path, or `embedded:<kind>` for the
+project's own synthetic clip (license-free, generated on demand).
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from collections import defaultdict
+from dataclasses import asdict
+from pathlib import Path
+
+from robot_hoi.errors import UserError
+from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg
+from robot_hoi.utils.atomic import atomic_write_text
+
+EMBEDDED_PREFIX = "embedded:"
+CLIP_SUFFIXES = (".pt", ".npz")
+GROUP_KEYS = ("subject", "object", "clip")
+TASK_FILE = "task.json"
+
+
+def expand_sources(data: list[str] | None) -> list[str]:
+    """Files and folders -> clip sources (sorted); nothing -> the embedded lift-and-carry clip."""
+    if not data:
+        return [f"{EMBEDDED_PREFIX}lift_carry"]
+    sources: list[str] = []
+    for item in data:
+        if item.startswith(EMBEDDED_PREFIX):
+            sources.append(item)
+            continue
+        path = Path(item)
+        if path.is_dir():
+            found = sorted(p for p in path.iterdir() if p.suffix in CLIP_SUFFIXES)
+            if not found:
+                raise UserError(f"{path}: no clips (*.pt, *.npz) in this folder")
+            sources += [str(p) for p in found]
+        elif path.is_file():
+            sources.append(str(path))
+        else:
+            raise UserError(f"{path}: no such clip file or folder")
+    return sources
+
+
+def load_source(source: str):
+    """One clip from a source string (validated by the data layer)."""
+    if source.startswith(EMBEDDED_PREFIX):
+        from robot_hoi.data.synth import default_clip
+
+        return default_clip(kind=source[len(EMBEDDED_PREFIX):])
+    from robot_hoi.data.clip import load_clip
+
+    return load_clip(source)
+
+
+def group_sources(sources: list[str], clips: list, by: str) -> dict[str, list[int]]:
+    """Teacher groups (InterMimic trains one teacher per subject). Clips of different objects never share an env,
+    so a group spanning several objects is split per object."""
+    if by not in GROUP_KEYS:
+        raise UserError(f"--group must be one of {', '.join(GROUP_KEYS)}, not {by!r}")
+    groups: dict[str, list[int]] = defaultdict(list)
+    for i, clip in enumerate(clips):
+        key = {"subject": clip.subject or "unknown", "object": clip.object_name, "clip": clip.name}[by]
+        groups[_safe(f"{key}") if by != "subject" else _safe(f"{key}-{clip.object_name}")].append(i)
+    return dict(sorted(groups.items()))
+
+
+def _safe(name: str) -> str:
+    return re.sub(r"[^A-Za-z0-9_.-]+", "_", name)
+
+
+def load_or_retarget(clip, embodiment, cache: Path | None):
+    """The clip's robot-space reference (RobotMotion), cached as npz next to the run."""
+    from robot_hoi.retarget.motion import RobotMotion
+    from robot_hoi.retarget.pipeline import retarget_clip
+
+    path = cache / f"{_safe(clip.name)}.npz" if cache is not None else None
+    if path is not None and path.exists():
+        return RobotMotion.load(path)
+    motion = retarget_clip(clip, embodiment).motion
+    if path is not None:
+        motion.save(path)
+    return motion
+
+
+def make_env(clips: list, env_cfg: InteractionEnvCfg, embodiment, cache: Path | None = None):
+    """An InteractionEnv tracking `clips` (all with the same object)."""
+    from robot_hoi.tasks.interaction.env import InteractionEnv
+    from robot_hoi.tasks.interaction.reference import build_reference
+    from robot_hoi.tasks.interaction.scene_setup import InteractionScene
+
+    objects = {c.object_name for c in clips}
+    if len(objects) != 1:
+        raise UserError(f"one environment holds one object; these clips use {sorted(objects)}")
+    if clips[0].object is None:
+        raise UserError(f"clip {clips[0].name}: no object mesh loaded; the simulation needs it")
+    scene = InteractionScene(embodiment, clips[0].object, self_collision=env_cfg.self_collision,
+                             density=env_cfg.object_density, friction=env_cfg.object_friction)
+    references = [build_reference(c, load_or_retarget(c, embodiment, cache)) for c in clips]
+    return InteractionEnv(env_cfg, scene, references)
+
+
+def write_task(run_dir: Path, sources: list[str], env_cfg: InteractionEnvCfg, embodiment_name: str,
+               group: str) -> None:
+    info = {"sources": sources, "group": group, "embodiment": embodiment_name, "env": asdict(env_cfg)}
+    atomic_write_text(run_dir / TASK_FILE, json.dumps(info, indent=2) + "\n")
+
+
+def read_task(checkpoint: Path) -> dict:
+    """task.json beside a checkpoint (or in its parent folder)."""
+    for folder in (checkpoint.parent, checkpoint.parent.parent):
+        path = folder / TASK_FILE
+        if path.exists():
+            try:
+                return json.loads(path.read_text())
+            except json.JSONDecodeError as exc:
+                raise UserError(f"{path}: not valid JSON ({exc})") from None
+    raise UserError(f"{checkpoint}: no {TASK_FILE} next to the checkpoint; pass --data to say what to evaluate")
