@@ -1,0 +1,111 @@
+"""PPO checkpoints: plain dicts of tensors, numbers and strings, written atomically and read with
+`torch.load(weights_only=True)` (nothing is unpickled). The resolved config travels as a JSON string, together
+with the observation layout and the git commit/diff of the code that trained it.
+"""
+
+from __future__ import annotations
+
+import subprocess
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from robot_hoi.errors import UserError
+from robot_hoi.paths import REPO_ROOT
+from robot_hoi.rl.config import TrainConfig
+from robot_hoi.rl.models import ActorCritic
+from robot_hoi.utils.atomic import atomic_path
+
+CHECKPOINT_FORMAT = "robot_hoi.ppo"
+CHECKPOINT_VERSION = 1
+_MAX_DIFF_CHARS = 2_000_000  # a runaway diff (e.g. a committed dataset) must not bloat every checkpoint
+_REQUIRED_KEYS = ("model", "config_json", "dims", "iteration")
+
+
+def git_state(repo: Path = REPO_ROOT) -> dict[str, str]:
+    """Commit hash and uncommitted diff of `repo`; empty strings when git or the repository is unavailable."""
+
+    def run(*args: str) -> str:
+        try:
+            out = subprocess.run(
+                ["git", "-C", str(repo), *args], capture_output=True, text=True, timeout=20, check=True
+            )
+        except (OSError, subprocess.SubprocessError):
+            return ""
+        return out.stdout
+
+    diff = run("diff", "HEAD")
+    if len(diff) > _MAX_DIFF_CHARS:
+        diff = diff[:_MAX_DIFF_CHARS] + "\n[diff truncated]\n"
+    return {"commit": run("rev-parse", "HEAD").strip(), "diff": diff}
+
+
+def save_checkpoint(path: str | Path, payload: dict[str, Any]) -> Path:
+    """Write a checkpoint atomically (a crash never leaves a half-written file under `path`)."""
+    path = Path(path)
+    payload = {"format": CHECKPOINT_FORMAT, "version": CHECKPOINT_VERSION, **payload}
+    with atomic_path(path) as tmp:
+        torch.save(payload, tmp)
+    return path
+
+
+def read_checkpoint(path: str | Path, map_location: str | torch.device = "cpu") -> dict[str, Any]:
+    """Load and sanity-check a checkpoint; UserError naming the file when it is missing or not ours."""
+    path = Path(path)
+    if not path.is_file():
+        raise UserError(f"{path}: checkpoint not found")
+    try:
+        data = torch.load(path, map_location=map_location, weights_only=True)
+    except Exception as exc:  # truncated file, foreign pickle, wrong format: all a bad user file
+        raise UserError(f"{path}: not a readable checkpoint ({type(exc).__name__}: {exc})") from None
+    if not isinstance(data, dict) or data.get("format") != CHECKPOINT_FORMAT:
+        raise UserError(f"{path}: not a robot-hoi PPO checkpoint")
+    if data.get("version") != CHECKPOINT_VERSION:
+        raise UserError(
+            f"{path}: checkpoint version {data.get('version')} (this code reads {CHECKPOINT_VERSION})"
+        )
+    missing = [k for k in _REQUIRED_KEYS if k not in data]
+    if missing:
+        raise UserError(f"{path}: checkpoint lacks {missing}")
+    return data
+
+
+def load_model_state(model: ActorCritic, state: dict, source: str | Path) -> None:
+    try:
+        model.load_state_dict(state)
+    except RuntimeError as exc:
+        first = str(exc).splitlines()[0] if str(exc) else "mismatch"
+        raise UserError(f"{source}: weights do not fit this model ({first})") from None
+
+
+def load_policy(
+    path: str | Path, device: str | torch.device = "cpu"
+) -> tuple[ActorCritic, TrainConfig, dict]:
+    """Rebuild the trained ActorCritic from a checkpoint alone (no env needed), in eval mode.
+
+    Returns (model, config, checkpoint dict). checkpoint["obs_layout"] has the actor/critic groups and sizes.
+    """
+    data = read_checkpoint(path, map_location=device)
+    cfg = TrainConfig.from_json(data["config_json"], f"{path} (stored config)")
+    dims = data["dims"]
+    model = ActorCritic(dims["actor_obs"], dims["critic_obs"], dims["num_actions"], cfg.model).to(device)
+    load_model_state(model, data["model"], path)
+    model.eval()
+    return model, cfg, data
+
+
+def prune_checkpoints(directory: Path, keep_last: int | None, pattern: str = "model_*.pt") -> None:
+    """Delete all but the newest `keep_last` periodic checkpoints (by iteration number in the name)."""
+    if keep_last is None:
+        return
+
+    def iteration(p: Path) -> int:
+        try:
+            return int(p.stem.split("_")[-1])
+        except ValueError:
+            return -1
+
+    found = sorted((p for p in directory.glob(pattern) if iteration(p) >= 0), key=iteration)
+    for old in found[:-keep_last]:
+        old.unlink(missing_ok=True)

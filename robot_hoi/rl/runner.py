@@ -1,0 +1,326 @@
+"""On-policy training loop: rollouts from a VecEnv, PPO updates, logging, progress, checkpoints and resume.
+
+    runner = OnPolicyRunner(env, load_train_config(), log_dir="runs/teacher_sub2", device="cuda")
+    runner.learn(parse_budget("2h"))       # or Budget(samples=5_000_000), "300it", "2h,50M" (first limit wins)
+    runner.resume("runs/teacher_sub2/model_1500.pt"); runner.learn(parse_budget("1h"))
+
+Run folder: model_<iteration>.pt checkpoints, scalars.jsonl (every logged scalar, one line per iteration),
+TensorBoard events, run_info.json (resolved config, obs layout, git commit) and git.diff.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections import deque
+from pathlib import Path
+from typing import Any
+
+import torch
+from rich.progress import (
+    BarColumn,
+    Progress,
+    TaskProgressColumn,
+    TextColumn,
+    TimeElapsedColumn,
+    TimeRemainingColumn,
+)
+from torch import Tensor
+
+from robot_hoi.errors import UserError
+from robot_hoi.rl.budget import Budget
+from robot_hoi.rl.checkpoint import (
+    git_state,
+    load_model_state,
+    prune_checkpoints,
+    read_checkpoint,
+    save_checkpoint,
+)
+from robot_hoi.rl.config import TrainConfig
+from robot_hoi.rl.env import VecEnv, concat_groups, group_dim
+from robot_hoi.rl.logger import JsonlWriter, Logger, LogWriter, TensorBoardWriter
+from robot_hoi.rl.models import ActorCritic
+from robot_hoi.rl.ppo import PPO
+from robot_hoi.utils.atomic import atomic_write_text
+
+_PPO_SCALARS = {
+    "surrogate_loss": "Loss/surrogate",
+    "value_loss": "Loss/value",
+    "bound_loss": "Loss/action_bound",
+    "entropy": "Loss/entropy",
+    "extra_actor_loss": "Loss/extra_actor",
+    "kl": "Policy/kl",
+    "clip_fraction": "Policy/clip_fraction",
+    "action_std": "Policy/action_std",
+    "actor_grad_norm": "Policy/actor_grad_norm",
+    "critic_grad_norm": "Policy/critic_grad_norm",
+    "actor_lr": "LR/actor",
+    "critic_lr": "LR/critic",
+}
+
+
+class OnPolicyRunner:
+    def __init__(
+        self,
+        env: VecEnv,
+        cfg: TrainConfig,
+        log_dir: str | Path | None,
+        device: str | torch.device = "cpu",
+        writers: list[LogWriter] | None = None,
+    ) -> None:
+        self.env = env
+        self.cfg = cfg
+        self.device = torch.device(device)
+        self.log_dir = Path(log_dir) if log_dir is not None else None
+        torch.manual_seed(cfg.seed)
+        rc = cfg.runner
+        self.actor_dim = group_dim(env, rc.actor_obs_groups, "actor")
+        self.critic_dim = group_dim(env, rc.critic_obs_groups, "critic")
+        group_dim(env, rc.extra_obs_groups, "extra")
+        extra_dims = {g: int(env.obs_dims[g]) for g in rc.extra_obs_groups}
+        self.model = ActorCritic(self.actor_dim, self.critic_dim, env.num_actions, cfg.model).to(self.device)
+        self.alg = PPO(self.model, cfg.ppo, self.device)
+        try:
+            self.alg.init_storage(env.num_envs, self.actor_dim, self.critic_dim, env.num_actions, extra_dims)
+        except ValueError as exc:
+            raise UserError(str(exc)) from None
+
+        self.iteration = 0
+        self.total_samples = 0
+        self.total_time_s = 0.0
+        self._obs: dict[str, Tensor] | None = None
+        self._git_cache: dict[str, str] | None = None
+        self._ep_return = torch.zeros(env.num_envs, device=self.device)
+        self._ep_length = torch.zeros(env.num_envs, device=self.device)
+        self.recent_returns: deque[float] = deque(maxlen=rc.episode_window)
+        self.recent_lengths: deque[float] = deque(maxlen=rc.episode_window)
+
+        all_writers: list[LogWriter] = list(writers or [])
+        if self.log_dir is not None:
+            all_writers.append(JsonlWriter(self.log_dir / "scalars.jsonl"))
+            if rc.tensorboard:
+                all_writers.append(TensorBoardWriter(self.log_dir))
+        self.logger = Logger(all_writers)
+
+    # --- observation plumbing ----------------------------------------------------------------------------------
+    def _to_device(self, obs: dict[str, Tensor]) -> dict[str, Tensor]:
+        return {k: v.to(self.device, torch.float32) for k, v in obs.items()}
+
+    def _split(self, obs: dict[str, Tensor]) -> tuple[Tensor, Tensor, dict[str, Tensor]]:
+        rc = self.cfg.runner
+        extra = {g: obs[g] for g in rc.extra_obs_groups}
+        return concat_groups(obs, rc.actor_obs_groups), concat_groups(obs, rc.critic_obs_groups), extra
+
+    def _select_actions(self, actor_obs: Tensor, critic_obs: Tensor, extra_obs: dict[str, Tensor]) -> Tensor:
+        """Actions executed in the rollout. Distillation overrides this to execute teacher actions at times."""
+        return self.alg.act(actor_obs, critic_obs, extra_obs)
+
+    # --- training ----------------------------------------------------------------------------------------------
+    def learn(self, budget: Budget) -> dict[str, float]:
+        """Train until `budget` (counted from this call) is used up; checkpoints periodically and at the end."""
+        if self._obs is None:
+            self._obs = self._to_device(self.env.reset())
+        self.model.train()
+        self._write_run_info()
+        start = time.monotonic()
+        samples = iterations = 0
+        batch = self.alg.storage.batch_size
+        progress = Progress(
+            TextColumn("[bold]{task.description}"),
+            BarColumn(),
+            TaskProgressColumn(),
+            TimeElapsedColumn(),
+            TextColumn("ETA"),
+            TimeRemainingColumn(),
+            disable=not self.cfg.runner.progress,
+            transient=False,
+        )
+        last_saved = -1
+        with progress:
+            task = progress.add_task(f"PPO, budget {budget.describe()}", total=1000)
+            while True:
+                t0 = time.monotonic()
+                env_logs = self._rollout()
+                t1 = time.monotonic()
+                stats = self.alg.update()
+                t2 = time.monotonic()
+                self.iteration += 1
+                iterations += 1
+                samples += batch
+                self.total_samples += batch
+                self.total_time_s += t2 - t0
+                self._log(stats, env_logs, collection_s=t1 - t0, learning_s=t2 - t1)
+                if self.iteration % self.cfg.runner.save_interval == 0:
+                    self._save_periodic()
+                    last_saved = self.iteration
+                elapsed = time.monotonic() - start
+                progress.update(
+                    task,
+                    completed=int(1000 * budget.fraction_done(elapsed, samples, iterations)),
+                    description=self._progress_text(batch / max(t2 - t0, 1e-9)),
+                )
+                if budget.exhausted(elapsed, samples, iterations):
+                    break
+        if last_saved != self.iteration:
+            self._save_periodic()
+        self.logger.flush()
+        return {
+            "iterations": float(iterations),
+            "samples": float(samples),
+            "wall_s": time.monotonic() - start,
+            "mean_return": self.mean_return(),
+        }
+
+    @torch.no_grad()
+    def _rollout(self) -> dict[str, float]:
+        sums: dict[str, float] = {}
+        counts: dict[str, int] = {}
+
+        def add(name: str, value: Any) -> None:
+            if isinstance(value, Tensor):
+                total, n = float(value.float().sum()), int(value.numel())
+            else:
+                total, n = float(value), 1
+            if n:
+                sums[name] = sums.get(name, 0.0) + total
+                counts[name] = counts.get(name, 0) + n
+
+        critic_groups = self.cfg.runner.critic_obs_groups
+        for _ in range(self.cfg.ppo.horizon):
+            actor_obs, critic_obs, extra_obs = self._split(self._obs)
+            actions = self._select_actions(actor_obs, critic_obs, extra_obs)
+            obs, rewards, terminated, truncated, extras = self.env.step(actions.to(self.env.device))
+            rewards = rewards.to(self.device, torch.float32)
+            terminated = terminated.to(self.device, torch.bool)
+            truncated = truncated.to(self.device, torch.bool)
+            final_obs = extras.get("final_obs")
+            final_critic = None
+            if final_obs is not None and all(g in final_obs for g in critic_groups):
+                final_critic = concat_groups(self._to_device(final_obs), critic_groups)
+            self.alg.process_env_step(rewards, terminated, truncated, final_critic)
+            self._obs = self._to_device(obs)
+
+            self._ep_return += rewards
+            self._ep_length += 1
+            done = terminated | truncated
+            if bool(done.any()):
+                self.recent_returns.extend(self._ep_return[done].tolist())
+                self.recent_lengths.extend(self._ep_length[done].tolist())
+                self._ep_return[done] = 0.0
+                self._ep_length[done] = 0.0
+            for name, value in extras.get("log", {}).items():
+                add(name, value)
+            for name, value in extras.get("episode_done", {}).items():
+                add(f"Episode/{name}", value)
+        self.alg.compute_returns(concat_groups(self._obs, critic_groups))
+        return {name: sums[name] / counts[name] for name in sums}
+
+    def mean_return(self) -> float:
+        """Mean undiscounted return of the last `episode_window` finished episodes (nan before any finished)."""
+        return sum(self.recent_returns) / len(self.recent_returns) if self.recent_returns else float("nan")
+
+    def _progress_text(self, samples_per_s: float) -> str:
+        return f"it {self.iteration} | return {self.mean_return():.3g} | {samples_per_s:,.0f} samples/s"
+
+    def _log(
+        self, stats: dict[str, float], env_logs: dict[str, float], collection_s: float, learning_s: float
+    ):
+        batch = self.alg.storage.batch_size
+        scalars = {_PPO_SCALARS.get(k, f"Loss/{k}"): v for k, v in stats.items()}
+        if self.recent_returns:
+            scalars["Train/mean_return"] = self.mean_return()
+            scalars["Train/mean_episode_length"] = sum(self.recent_lengths) / len(self.recent_lengths)
+        scalars["Perf/samples_per_s"] = batch / max(collection_s + learning_s, 1e-9)
+        scalars["Perf/collection_s"] = collection_s
+        scalars["Perf/learning_s"] = learning_s
+        scalars["Perf/total_samples"] = float(self.total_samples)
+        scalars.update(env_logs)
+        self.logger.log_scalars(scalars, self.iteration)
+
+    # --- checkpoints -------------------------------------------------------------------------------------------
+    def _git(self) -> dict[str, str]:
+        if self._git_cache is None:
+            self._git_cache = git_state()
+        return self._git_cache
+
+    def obs_layout(self) -> dict:
+        rc = self.cfg.runner
+        return {
+            "actor_groups": list(rc.actor_obs_groups),
+            "critic_groups": list(rc.critic_obs_groups),
+            "obs_dims": {k: int(v) for k, v in self.env.obs_dims.items()},
+        }
+
+    def _write_run_info(self) -> None:
+        if self.log_dir is None:
+            return
+        git = self._git()
+        info = {
+            "config": json.loads(self.cfg.to_json()),
+            "obs_layout": self.obs_layout(),
+            "num_envs": self.env.num_envs,
+            "num_actions": self.env.num_actions,
+            "git_commit": git["commit"],
+        }
+        atomic_write_text(self.log_dir / "run_info.json", json.dumps(info, indent=2) + "\n")
+        atomic_write_text(self.log_dir / "git.diff", git["diff"])
+
+    def _save_periodic(self) -> None:
+        if self.log_dir is None:
+            return
+        self.save(self.log_dir / f"model_{self.iteration}.pt")
+        prune_checkpoints(self.log_dir, self.cfg.runner.keep_last)
+
+    def save(self, path: str | Path) -> Path:
+        git = self._git()
+        return save_checkpoint(
+            path,
+            {
+                "model": self.model.state_dict(),
+                "optimizer": self.alg.optimizer_state(),
+                "iteration": self.iteration,
+                "total_samples": self.total_samples,
+                "total_time_s": self.total_time_s,
+                "config_json": self.cfg.to_json(),
+                "dims": {
+                    "actor_obs": self.actor_dim,
+                    "critic_obs": self.critic_dim,
+                    "num_actions": self.env.num_actions,
+                },
+                "obs_layout": self.obs_layout(),
+                "git_commit": git["commit"],
+                "git_diff": git["diff"],
+                "torch_rng_state": torch.get_rng_state(),
+            },
+        )
+
+    def load(self, path: str | Path, load_optimizer: bool = False) -> dict[str, Any]:
+        """Load model weights and normaliser statistics (and optionally the optimisers) from a checkpoint."""
+        data = read_checkpoint(path, map_location=self.device)
+        dims = data["dims"]
+        ours = {
+            "actor_obs": self.actor_dim,
+            "critic_obs": self.critic_dim,
+            "num_actions": self.env.num_actions,
+        }
+        if {k: int(dims.get(k, -1)) for k in ours} != ours:
+            raise UserError(f"{path}: checkpoint dims {dict(dims)} do not match this env/config {ours}")
+        load_model_state(self.model, data["model"], path)
+        if load_optimizer:
+            if "optimizer" not in data:
+                raise UserError(f"{path}: checkpoint has no optimizer state to resume from")
+            self.alg.load_optimizer_state(data["optimizer"])
+        return data
+
+    def resume(self, path: str | Path) -> None:
+        """Continue a run: weights, normalisers, optimisers, iteration/sample counters and the torch RNG."""
+        data = self.load(path, load_optimizer=True)
+        self.iteration = int(data["iteration"])
+        self.total_samples = int(data.get("total_samples", 0))
+        self.total_time_s = float(data.get("total_time_s", 0.0))
+        rng = data.get("torch_rng_state")
+        if isinstance(rng, Tensor):
+            torch.set_rng_state(rng.cpu())
+
+    def close(self) -> None:
+        self.logger.close()

@@ -1,0 +1,140 @@
+from __future__ import annotations
+
+import json
+
+import pytest
+import torch
+
+from robot_hoi.errors import UserError
+from robot_hoi.rl.budget import Budget
+from robot_hoi.rl.checkpoint import load_policy, read_checkpoint
+from robot_hoi.rl.config import FAST_PPO_CONFIG, load_train_config
+from robot_hoi.rl.dummy_env import ReachEnv
+from robot_hoi.rl.logger import MemoryWriter
+from robot_hoi.rl.runner import OnPolicyRunner
+
+TINY = [
+    "runner.progress=false",
+    "runner.tensorboard=false",
+    "model.actor_hidden_dims=[64, 64]",
+    "model.critic_hidden_dims=[64, 64]",
+    "ppo.horizon=16",
+]
+
+
+@pytest.fixture(autouse=True)
+def _one_thread():
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)  # tiny nets: threading only adds overhead on the shared 2-core machine
+    yield
+    torch.set_num_threads(threads)
+
+
+def _runner(log_dir=None, overrides=(), num_envs=64, seed=0):
+    cfg = load_train_config(FAST_PPO_CONFIG, [*TINY, *overrides])
+    memory = MemoryWriter()
+    env = ReachEnv(num_envs=num_envs, max_episode_length=32, seed=seed)
+    return OnPolicyRunner(env, cfg, log_dir, writers=[memory]), memory
+
+
+def test_runner_learns_reach_task():
+    runner, memory = _runner()
+    result = runner.learn(Budget(iterations=30))
+    returns = [v for _, v in memory.scalars["Train/mean_return"]]
+    # A random policy wanders off (returns around -10); reaching and holding the target scores ~26 of 32.
+    assert returns[0] < 0.0
+    assert result["mean_return"] > 20.0
+    assert result["mean_return"] > returns[0] + 20.0
+    assert result["iterations"] == 30 and result["samples"] == 30 * 16 * 64
+    # env "log" scalars and per-episode stats are aggregated and written
+    assert "Episode_Reward/progress" in memory.scalars and "Metrics/within_0.1" in memory.scalars
+    assert memory.last("Episode/final_distance") < 0.3
+    for name in (
+        "Loss/surrogate",
+        "Loss/value",
+        "Loss/action_bound",
+        "LR/actor",
+        "LR/critic",
+        "Train/mean_episode_length",
+        "Perf/samples_per_s",
+        "Perf/collection_s",
+        "Perf/learning_s",
+    ):
+        assert name in memory.scalars, name
+
+
+def test_checkpoint_resume_restores_everything_and_continues(tmp_path):
+    runner, _ = _runner(tmp_path / "a", ["runner.save_interval=2", "runner.keep_last=2"])
+    runner.learn(Budget(iterations=5))
+    # periodic checkpoints at 2 and 4, pruned to the last 2, plus the final one at 5
+    assert sorted(p.name for p in (tmp_path / "a").glob("model_*.pt")) == ["model_4.pt", "model_5.pt"]
+    assert (tmp_path / "a" / "scalars.jsonl").read_text().count("\n") == 5
+    info = json.loads((tmp_path / "a" / "run_info.json").read_text())
+    assert info["obs_layout"]["actor_groups"] == ["policy"] and info["num_actions"] == 2
+    ckpt = tmp_path / "a" / "model_5.pt"
+    data = read_checkpoint(ckpt)
+    assert data["iteration"] == 5 and data["total_samples"] == 5 * 16 * 64
+    assert json.loads(data["config_json"])["ppo"]["num_minibatches"] == 4
+
+    resumed, _ = _runner(tmp_path / "b", seed=1)
+    resumed.resume(ckpt)
+    for (name, a), (_, b) in zip(
+        runner.model.state_dict().items(), resumed.model.state_dict().items(), strict=True
+    ):
+        assert torch.equal(a, b), name
+    assert resumed.iteration == 5 and resumed.total_samples == runner.total_samples
+    opt_a, opt_b = runner.alg.actor_optimizer.state_dict(), resumed.alg.actor_optimizer.state_dict()
+    for key, state in opt_a["state"].items():
+        assert torch.equal(state["exp_avg_sq"], opt_b["state"][key]["exp_avg_sq"])
+    count_before = float(resumed.model.actor_normalizer.count)
+    assert count_before == float(runner.model.actor_normalizer.count) > 0
+
+    resumed.learn(Budget(iterations=2))
+    assert resumed.iteration == 7
+    assert float(resumed.model.actor_normalizer.count) > count_before
+    assert (tmp_path / "b" / "model_7.pt").is_file()
+
+    model, cfg, data = load_policy(ckpt)
+    assert not model.training and cfg.ppo.num_minibatches == 4
+    obs = torch.randn(3, 4)
+    assert torch.equal(model.act_inference(obs), runner.model.act_inference(obs))
+
+
+def test_bad_checkpoints_are_user_errors(tmp_path):
+    runner, _ = _runner()
+    with pytest.raises(UserError, match="not found"):
+        runner.resume(tmp_path / "missing.pt")
+    junk = tmp_path / "junk.pt"
+    junk.write_bytes(b"not a checkpoint")
+    with pytest.raises(UserError, match="junk.pt"):
+        runner.resume(junk)
+    other = tmp_path / "other.pt"
+    torch.save({"weights": torch.zeros(2)}, other)
+    with pytest.raises(UserError, match="not a robot-hoi PPO checkpoint"):
+        runner.load(other)
+    # a checkpoint from an env with other observation sizes
+    good = runner.save(tmp_path / "good.pt")
+    cfg = load_train_config(FAST_PPO_CONFIG, TINY)
+    wider = OnPolicyRunner(ReachEnv(num_envs=8, dim=3), cfg, None)
+    with pytest.raises(UserError, match="do not match"):
+        wider.load(good)
+
+
+def test_missing_observation_group_and_unsplittable_batch_are_user_errors():
+    env = ReachEnv(num_envs=4)
+    with pytest.raises(UserError, match="offers"):
+        OnPolicyRunner(
+            env, load_train_config(FAST_PPO_CONFIG, [*TINY, "runner.critic_obs_groups=[privileged]"]), None
+        )
+    with pytest.raises(UserError, match="minibatch"):
+        OnPolicyRunner(env, load_train_config(overrides=TINY), None)  # Table C's 16384 > 16 x 4 samples
+
+
+def test_tensorboard_and_wall_budget(tmp_path):
+    runner, memory = _runner(tmp_path, ["runner.tensorboard=true"], num_envs=8)
+    result = runner.learn(Budget(wall_seconds=0.5))
+    runner.close()
+    assert result["iterations"] >= 1 and result["wall_s"] < 5.0
+    assert list(tmp_path.glob("events.out.tfevents.*"))
+    lines = (tmp_path / "scalars.jsonl").read_text().splitlines()
+    assert len(lines) == result["iterations"] and "Loss/value" in json.loads(lines[-1])
