@@ -13,50 +13,24 @@ PRESETS = {"paper": CONFIGS_DIR / "train" / "ppo.yaml", "fast": CONFIGS_DIR / "t
 
 
 def register(subparsers) -> None:
-    p = subparsers.add_parser(
-        "train", help="train teacher policies (InterMimic imitation-as-retargeting)", description=__doc__
-    )
-    p.add_argument(
-        "stage",
-        nargs="?",
-        default="teacher",
-        choices=["teacher", "student"],
-        help="teacher (default) or student (distillation from teachers)",
-    )
+    p = subparsers.add_parser("train", help="train teacher policies (InterMimic imitation-as-retargeting)",
+                              description=__doc__)
+    p.add_argument("stage", nargs="?", default="teacher", choices=["teacher", "student"],
+                   help="teacher (default) or student (distillation from teachers)")
     p.add_argument("--embodiment", default="g1_inspire")
-    p.add_argument(
-        "--data",
-        nargs="*",
-        default=None,
-        help="clip files or folders (.pt InterMimic format, .npz native); default: the embedded clip",
-    )
-    p.add_argument(
-        "--group",
-        default="subject",
-        choices=["subject", "object", "clip"],
-        help="one teacher per group (default: per subject, as InterMimic)",
-    )
-    p.add_argument(
-        "--budget",
-        default="5m",
-        help="wall time (90s, 10m, 2h) or samples (200k, 5M); split evenly over the groups",
-    )
+    p.add_argument("--data", nargs="*", default=None,
+                   help="clip files or folders (.pt InterMimic format, .npz native); default: the embedded clip")
+    p.add_argument("--group", default="subject", choices=["subject", "object", "clip"],
+                   help="one teacher per group (default: per subject, as InterMimic)")
+    p.add_argument("--budget", default="5m", help="wall time (90s, 10m, 2h) or samples (200k, 5M); split evenly "
+                                                  "over the groups")
     p.add_argument("--out", default=None, help="run folder (default runs/<date>-<embodiment>)")
-    p.add_argument(
-        "--preset",
-        default="fast",
-        choices=sorted(PRESETS),
-        help="PPO settings: paper = InterMimic Table C (tuned for 8192 GPU envs), fast = CPU-sized",
-    )
+    p.add_argument("--preset", default="fast", choices=sorted(PRESETS),
+                   help="PPO settings: paper = InterMimic Table C (tuned for 8192 GPU envs), fast = CPU-sized")
     p.add_argument("--config", default=None, help="a training YAML instead of the preset")
     p.add_argument("--task-config", default=str(TASK_CONFIG), help="environment YAML")
-    p.add_argument(
-        "--set",
-        dest="overrides",
-        action="append",
-        default=[],
-        help="override, e.g. --set env.num_envs=128 --set ppo.actor_lr=1e-4 (repeatable)",
-    )
+    p.add_argument("--set", dest="overrides", action="append", default=[],
+                   help="override, e.g. --set env.num_envs=128 --set ppo.actor_lr=1e-4 (repeatable)")
     p.add_argument("--resume", action="store_true", help="continue each group from its latest checkpoint")
     p.add_argument("--device", default="cpu")
     p.set_defaults(func=run)
@@ -78,7 +52,7 @@ def run(args: argparse.Namespace) -> int:
     from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg
     from robot_hoi.utils.config import load_yaml_dataclass
 
-    env_overrides = [o[len("env.") :] for o in args.overrides if o.startswith("env.")]
+    env_overrides = [o[len("env."):] for o in args.overrides if o.startswith("env.")]
     train_overrides = [o for o in args.overrides if not o.startswith("env.")]
     embodiment = load_embodiment(args.embodiment)
     env_cfg = load_yaml_dataclass(InteractionEnvCfg, args.task_config, env_overrides)
@@ -89,11 +63,7 @@ def run(args: argparse.Namespace) -> int:
     sources = factory.expand_sources(args.data)
     clips = [factory.load_source(s) for s in sources]
     groups = factory.group_sources(sources, clips, args.group)
-    out = (
-        Path(args.out)
-        if args.out
-        else REPO_ROOT / "runs" / f"{time.strftime('%Y%m%d-%H%M%S')}-{embodiment.name}"
-    )
+    out = Path(args.out) if args.out else REPO_ROOT / "runs" / f"{time.strftime('%Y%m%d-%H%M%S')}-{embodiment.name}"
     print(f"training {len(groups)} teacher(s) on {len(clips)} clip(s) -> {out}")
     per_group = _split_budget(budget, len(groups))
     summary = {}
@@ -111,10 +81,8 @@ def run(args: argparse.Namespace) -> int:
             if latest is not None:
                 runner.resume(latest)
                 print(f"[{name}] resumed from {latest}")
-        print(
-            f"[{name}] {len(group_clips)} clip(s): {', '.join(c.name for c in group_clips)}; "
-            f"obs {env.obs_dims}, {env.num_envs} envs"
-        )
+        print(f"[{name}] {len(group_clips)} clip(s): {', '.join(c.name for c in group_clips)}; "
+              f"obs {env.obs_dims}, {env.num_envs} envs")
         summary[name] = runner.learn(per_group)
         runner.close()
     for name, stats in summary.items():
@@ -128,14 +96,8 @@ def _split_budget(budget, parts: int):
     """Each group gets an equal share of the wall time / samples / iterations."""
     from dataclasses import replace
 
-    share = {
-        k: (None if v is None else type(v)(max(v / parts, 1)))
-        for k, v in (
-            ("wall_seconds", budget.wall_seconds),
-            ("samples", budget.samples),
-            ("iterations", budget.iterations),
-        )
-    }
+    share = {k: (None if v is None else type(v)(max(v / parts, 1))) for k, v in
+             (("wall_seconds", budget.wall_seconds), ("samples", budget.samples), ("iterations", budget.iterations))}
     return replace(budget, **share)
 
 
@@ -143,8 +105,6 @@ def _latest_checkpoint(run_dir: Path) -> Path | None:
     final = run_dir / "model_final.pt"
     if final.exists():
         return final
-    found = sorted(
-        run_dir.glob("model_*.pt"),
-        key=lambda p: int(p.stem.split("_")[-1]) if p.stem.split("_")[-1].isdigit() else -1,
-    )
+    found = sorted(run_dir.glob("model_*.pt"), key=lambda p: int(p.stem.split("_")[-1]) if
+                   p.stem.split("_")[-1].isdigit() else -1)
     return found[-1] if found else None

@@ -18,13 +18,10 @@ TASK_CONFIG = CONFIGS_DIR / "tasks" / "interaction.yaml"
 
 
 def register(subparsers) -> None:
-    p = subparsers.add_parser(
-        "eval", help="evaluate a checkpoint: success, duration, E_h, E_o per clip", description=__doc__
-    )
+    p = subparsers.add_parser("eval", help="evaluate a checkpoint: success, duration, E_h, E_o per clip",
+                              description=__doc__)
     p.add_argument("checkpoint", help="a model_*.pt from `robot-hoi train`, or `untrained` for a baseline")
-    p.add_argument(
-        "--data", nargs="*", default=None, help="clips (default: the ones the checkpoint trained on)"
-    )
+    p.add_argument("--data", nargs="*", default=None, help="clips (default: the ones the checkpoint trained on)")
     p.add_argument("--embodiment", default="g1_inspire")
     p.add_argument("--episodes", type=int, default=8, help="episodes per clip (run in parallel)")
     p.add_argument("--preset", default="fast", choices=["fast", "paper"], help="network for `untrained`")
@@ -57,11 +54,8 @@ def run(args: argparse.Namespace) -> int:
             raise UserError(f"{ckpt}: no such checkpoint")
         model, _, _ = load_policy(ckpt)
         task = factory.read_task(ckpt) if args.data is None else None
-        env_cfg = (
-            load_dataclass(InteractionEnvCfg, task["env"], f"{ckpt} task")
-            if task
-            else load_yaml_dataclass(InteractionEnvCfg, TASK_CONFIG)
-        )
+        env_cfg = load_dataclass(InteractionEnvCfg, task["env"], f"{ckpt} task") if task else \
+            load_yaml_dataclass(InteractionEnvCfg, TASK_CONFIG)
         sources = task["sources"] if task else factory.expand_sources(args.data)
     embodiment = load_embodiment(args.embodiment)
     _evaluation_settings(env_cfg, args)
@@ -73,9 +67,7 @@ def run(args: argparse.Namespace) -> int:
         if model is None:
             torch.manual_seed(args.seed)
             train_cfg = load_train_config(PRESETS[args.preset])
-            model = ActorCritic(
-                env.obs_dims["policy"], env.obs_dims["critic"], env.num_actions, train_cfg.model
-            )
+            model = ActorCritic(env.obs_dims["policy"], env.obs_dims["critic"], env.num_actions, train_cfg.model)
             model.eval()
         results[clip.name] = evaluate(env, model)
     summary = _summarise(results)
@@ -138,20 +130,9 @@ def _print_table(name: str, results, summary) -> None:
     for col in ("clip", "episodes", "success", "duration (s)", "E_h (cm)", "E_o (cm)"):
         table.add_column(col, justify="right" if col != "clip" else "left")
     for clip, r in results.items():
-        table.add_row(
-            clip,
-            str(r["episodes"]),
-            f"{r['success_rate']:.2f}",
-            f"{r['duration_s']:.2f} / {r['clip_duration_s']:.2f}",
-            f"{r['E_h_cm']:.1f}",
-            f"{r['E_o_cm']:.1f}",
-        )
-    table.add_row(
-        "mean",
-        "",
-        f"{summary['success_rate']:.2f}",
-        f"{summary['duration_s']:.2f}",
-        f"{summary['E_h_cm']:.1f}",
-        f"{summary['E_o_cm']:.1f}",
-    )
+        table.add_row(clip, str(r["episodes"]), f"{r['success_rate']:.2f}",
+                      f"{r['duration_s']:.2f} / {r['clip_duration_s']:.2f}", f"{r['E_h_cm']:.1f}",
+                      f"{r['E_o_cm']:.1f}")
+    table.add_row("mean", "", f"{summary['success_rate']:.2f}", f"{summary['duration_s']:.2f}",
+                  f"{summary['E_h_cm']:.1f}", f"{summary['E_o_cm']:.1f}")
     Console().print(table)
