@@ -97,7 +97,8 @@ def _convert(tp: Any, value: Any, source: str, key: str) -> Any:
             raise UserError(f"{where}: expected a mapping, got {value!r}")
         key_tp, val_tp = typing.get_args(tp) or (Any, Any)
         return {
-            _convert(key_tp, k, source, key): _convert(val_tp, v, source, f"{key}.{k}") for k, v in value.items()
+            _convert(key_tp, k, source, key): _convert(val_tp, v, source, f"{key}.{k}")
+            for k, v in value.items()
         }
     if origin is typing.Literal:
         if value not in typing.get_args(tp):
