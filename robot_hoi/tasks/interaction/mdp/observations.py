@@ -139,3 +139,11 @@ def critic_extras(env) -> Tensor:
     """Privileged extras for the critic: clip phase and contact forces."""
     phase = (env.ref_index.float() / max(env.reference.num_frames - 1, 1))[:, None]
     return torch.cat([phase, 0.01 * _flat(env.contact_force)], dim=-1)
+
+
+def teacher_observation_spec(env) -> list[dict]:
+    """Names and sizes of the policy observation, in order (exported with the policy)."""
+    spec = [{"name": f"teacher.{term.__name__}", "size": int(term(env).shape[1])} for term in SELF_TERMS]
+    spec += [{"name": f"teacher.reference_goal_k{k}", "size": int(reference_goal(env, k).shape[1])}
+             for k in env.cfg.keyframes]
+    return spec
