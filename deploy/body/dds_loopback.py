@@ -1,0 +1,91 @@
+"""A simulated G1 that speaks the real DDS topics: subscribes rt/lowcmd, publishes rt/lowstate.
+
+For developing and testing UnitreeDdsBody on one machine (loopback interface, its own domain id). Behind the
+topics it runs deploy.body.simulated.SimulatedBody; commands with a wrong CRC are counted and ignored, as the
+robot does. Needs cyclonedds.
+"""
+
+from __future__ import annotations
+
+import threading
+
+import numpy as np
+
+from deploy.body.simulated import SimulatedBody
+from deploy.body.unitree_dds import (
+    LOWCMD_TOPIC,
+    LOWSTATE_TOPIC,
+    DdsEndpoint,
+    idl_to_lowcmd,
+    idl_types,
+    lowstate_to_idl,
+)
+from deploy.body.unitree_lowlevel import LowStateFrame
+from deploy.clock import MonotonicClock
+
+
+class DdsLoopbackRobot:
+    def __init__(self, domain_id: int, interface: str | None = "lo", num_joints: int = 29, rate_hz: float = 500.0,
+                 mode_machine: int = 5, initial_q: np.ndarray | None = None):
+        self.domain_id = domain_id
+        self.interface = interface
+        self.rate_hz = rate_hz
+        self.mode_machine = mode_machine
+        self.body = SimulatedBody(num_joints, clock=MonotonicClock(), initial_q=initial_q)
+        self.num_joints = num_joints
+        self.commands_received = 0
+        self.crc_errors = 0
+        self.last_command = None
+        self.corrupt_state_crc = False
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._endpoint: DdsEndpoint | None = None
+        self._lock = threading.Lock()
+        self._tick = 0
+
+    def start(self) -> DdsLoopbackRobot:
+        T = idl_types()
+        self.body.connect()
+        self._endpoint = DdsEndpoint(self.domain_id, self.interface, LOWCMD_TOPIC, T.LowCmd_, LOWSTATE_TOPIC,
+                                     T.LowState_, self._on_command)
+        self._thread = threading.Thread(target=self._publish_loop, name="dds-loopback-robot", daemon=True)
+        self._thread.start()
+        return self
+
+    def _on_command(self, msg) -> None:
+        frame = idl_to_lowcmd(msg)
+        with self._lock:
+            if not frame.crc_ok():
+                self.crc_errors += 1
+                return
+            self.commands_received += 1
+            self.last_command = frame
+            n = self.num_joints
+            self.body.send(frame.q[:n], frame.dq[:n], frame.kp[:n], frame.kd[:n], frame.tau[:n])
+
+    def _publish_loop(self) -> None:
+        period = 1.0 / self.rate_hz
+        clock = self.body.clock
+        deadline = clock.now()
+        while not self._stop.is_set():
+            with self._lock:
+                state = self.body.read_state()
+            frame = LowStateFrame(mode_machine=self.mode_machine, tick=self._tick)
+            n = self.num_joints
+            frame.q[:n], frame.dq[:n] = state.q, state.dq
+            frame.imu_quat_wxyz[:] = state.imu_quat_wxyz
+            frame.with_crc()
+            if self.corrupt_state_crc:
+                frame.crc ^= 0x1
+            self._endpoint.write(lowstate_to_idl(frame))
+            self._tick += 1
+            deadline += period
+            clock.sleep_until(deadline)
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=2.0)
+        if self._endpoint is not None:
+            self._endpoint.close()
+            self._endpoint = None

@@ -1,0 +1,74 @@
+"""Operator input for the runtime: start the policy from HOLD, stop, e-stop.
+
+`poll()` returns the events that arrived since the last call: "start", "stop" (end the run through DAMP) or
+"estop" (DAMP now). Implementations: `AutoStart` (dry runs: start as soon as HOLD allows), `KeyboardOperator`
+(a thread reading lines on stdin: Enter or "s" = start, "q" = stop, "x"/"e" = e-stop), `ScriptedOperator`
+(events at given clock times, for tests). SIGINT is wired to Runtime.request_estop by the CLI.
+"""
+
+from __future__ import annotations
+
+import sys
+import threading
+from collections import deque
+
+from deploy.clock import Clock
+
+EVENTS = ("start", "stop", "estop")
+
+
+class OperatorInput:
+    def poll(self) -> list[str]:
+        return []
+
+    def close(self) -> None:
+        return None
+
+
+class AutoStart(OperatorInput):
+    """Asks to start once; the runtime honours it in HOLD after SafetyConfig.auto_start_after_s."""
+
+    def __init__(self):
+        self._sent = False
+
+    def poll(self) -> list[str]:
+        if self._sent:
+            return []
+        self._sent = True
+        return ["start"]
+
+
+class ScriptedOperator(OperatorInput):
+    def __init__(self, clock: Clock, script: list[tuple[float, str]]):
+        self.clock = clock
+        self._script = deque(sorted(script))
+
+    def poll(self) -> list[str]:
+        out = []
+        while self._script and self._script[0][0] <= self.clock.now():
+            out.append(self._script.popleft()[1])
+        return out
+
+
+class KeyboardOperator(OperatorInput):
+    KEYS = {"": "start", "s": "start", "q": "stop", "x": "estop", "e": "estop"}
+
+    def __init__(self, stream=None):
+        self._stream = stream or sys.stdin
+        self._events: deque[str] = deque()
+        self._lock = threading.Lock()
+        self._thread = threading.Thread(target=self._read, name="operator-keyboard", daemon=True)
+        self._thread.start()
+
+    def _read(self) -> None:
+        for line in self._stream:
+            event = self.KEYS.get(line.strip().lower())
+            if event is not None:
+                with self._lock:
+                    self._events.append(event)
+
+    def poll(self) -> list[str]:
+        with self._lock:
+            out = list(self._events)
+            self._events.clear()
+        return out

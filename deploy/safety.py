@@ -1,0 +1,172 @@
+"""What stands between the policy and the hardware: phases, input freshness, action sanity, target shaping.
+
+Phases (an explicit state machine, driven by deploy.loop.Runtime):
+
+    WAIT_STATE -> ZERO_TORQUE -> RAMP_TO_DEFAULT -> HOLD -> POLICY -> DAMP
+    WAIT_STATE       nothing is sent until body, hands (and the tracker, if the policy needs it) report fresh data
+    ZERO_TORQUE      kp = kd = 0 for `zero_torque_s` (the robot hangs limp in its gantry)
+    RAMP_TO_DEFAULT  linear interpolation from the measured pose to default_pose over `ramp_s`, policy gains
+    HOLD             default_pose until the operator starts the policy (or --auto-start)
+    POLICY           joint targets from the policy
+    DAMP             kp = 0, kd = damp_kd, hands in their safe state; terminal: the runtime exits after `damp_s`
+
+Any fault in a commanding phase goes to DAMP: body / hand state older than `max_input_age_periods` control
+periods, hand link lost or device error bits, non-finite state, measured joints beyond their limits (+ margin),
+non-finite or absurd actions (|a| > action_fault_factor * action_clip), tracker poses stale during POLICY, IMU
+and tracker disagreeing on the pelvis tilt, an e-stop or SIGINT. Targets are clamped to the joint limits and
+rate limited per tick (`max_target_rate` rad/s) before they are sent; a final check refuses anything outside
+the limits.
+"""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass
+
+import numpy as np
+
+from deploy.body.base import BodyState
+from deploy.contract import PolicyContract
+from deploy.hand_pair import HandsReading
+from deploy.rotations import tilt_angle_between
+from deploy.tracking import TrackedPoses
+
+
+class Phase(enum.IntEnum):
+    WAIT_STATE = 0
+    ZERO_TORQUE = 1
+    RAMP_TO_DEFAULT = 2
+    HOLD = 3
+    POLICY = 4
+    DAMP = 5
+
+
+COMMANDING_PHASES = (Phase.ZERO_TORQUE, Phase.RAMP_TO_DEFAULT, Phase.HOLD, Phase.POLICY)
+
+
+@dataclass
+class SafetyConfig:
+    max_input_age_periods: float = 2.0  # inputs older than this many control periods -> DAMP
+    wait_timeout_s: float = 5.0  # WAIT_STATE gives up (exit, nothing was commanded) after this
+    zero_torque_s: float = 0.5
+    ramp_s: float = 2.0
+    auto_start_after_s: float | None = None  # None: wait for the operator in HOLD
+    damp_s: float = 1.0  # DAMP commands are sent this long before the runtime exits
+    damp_kd: float = 8.0  # N m s / rad, Unitree's damping-mode gain
+    max_target_rate: float = 10.0  # rad/s, per-tick change limit on every joint target
+    action_fault_factor: float = 4.0  # |action| beyond factor * action_clip is a broken policy -> DAMP
+    joint_limit_margin: float = 0.1  # rad; measured q beyond limits + margin -> DAMP
+    max_tilt_mismatch_rad: float | None = 0.35  # IMU vs tracker pelvis tilt; None disables the check
+    hand_wait_fraction: float = 0.3  # how long (fraction of a period) a tick waits for last tick's hand exchange
+
+
+def input_faults(
+    now: float,
+    dt: float,
+    config: SafetyConfig,
+    contract: PolicyContract,
+    body: BodyState | None,
+    hands: HandsReading,
+    poses: TrackedPoses,
+    *,
+    need_tracker: bool,
+) -> list[str]:
+    """Everything wrong with this tick's inputs, as short reasons (empty list: all fresh and sane)."""
+    max_age = config.max_input_age_periods * dt
+    faults = []
+    if body is None:
+        faults.append("no body state")
+    else:
+        if now - body.stamp > max_age:
+            faults.append(f"body state stale ({(now - body.stamp) * 1e3:.1f} ms old)")
+        if not body.is_finite():
+            faults.append("body state not finite")
+        else:
+            n = contract.num_body
+            margin = config.joint_limit_margin
+            beyond = (body.q < contract.joint_lower[:n] - margin) | (body.q > contract.joint_upper[:n] + margin)
+            if np.any(beyond):
+                i = int(np.argmax(beyond))
+                faults.append(f"joint limit breach: {contract.actuator_names[i]} at {body.q[i]:.3f} rad")
+    for side, stamp in zip(("left", "right"), hands.stamps, strict=True):
+        if now - stamp > max_age:
+            faults.append(f"{side} hand state stale ({(now - stamp) * 1e3:.1f} ms old)")
+    faults.extend(hands.faults)
+    if need_tracker:
+        faults.extend(tracker_faults(now, max_age, contract, poses))
+        if config.max_tilt_mismatch_rad is not None and body is not None and body.is_finite() \
+                and poses.robot.is_finite():
+            tilt = tilt_angle_between(body.imu_quat_wxyz, poses.robot.quat_wxyz)
+            if tilt > config.max_tilt_mismatch_rad:
+                faults.append(f"IMU and tracker disagree on pelvis tilt by {np.degrees(tilt):.1f} deg")
+    return faults
+
+
+def tracker_faults(now: float, max_age: float, contract: PolicyContract, poses: TrackedPoses) -> list[str]:
+    faults = []
+    checks = [("robot", poses.robot)]
+    if contract.uses_object:
+        checks.append(("object", poses.object))
+    for name, pose in checks:
+        if now - pose.stamp > max_age:
+            age = "never seen" if not np.isfinite(pose.stamp) else f"{(now - pose.stamp) * 1e3:.1f} ms old"
+            faults.append(f"{name} pose stale ({age})")
+        elif not pose.is_finite():
+            faults.append(f"{name} pose not finite")
+    return faults
+
+
+def action_fault(action: np.ndarray, contract: PolicyContract, config: SafetyConfig) -> str | None:
+    if not np.all(np.isfinite(action)):
+        return f"policy action not finite (index {int(np.argmax(~np.isfinite(action)))})"
+    limit = config.action_fault_factor * contract.action_clip
+    if np.any(np.abs(action) > limit):
+        i = int(np.argmax(np.abs(action)))
+        return f"policy action out of range: {contract.actuator_names[i]} = {action[i]:.3g} (limit {limit:.3g})"
+    return None
+
+
+class TargetShaper:
+    """Clamp to joint limits, then limit the per-tick change; counts what it had to change."""
+
+    def __init__(self, contract: PolicyContract, dt: float, max_rate: float):
+        self.lower = contract.joint_lower
+        self.upper = contract.joint_upper
+        self.max_step = max_rate * dt
+        self.previous: np.ndarray | None = None
+        self.clamped_ticks = 0
+        self.rate_limited_ticks = 0
+        self.last_clamped: np.ndarray = np.zeros(len(self.lower), dtype=bool)
+        self.last_rate_limited: np.ndarray = np.zeros(len(self.lower), dtype=bool)
+
+    def reset(self, current: np.ndarray) -> None:
+        """Start rate limiting from `current` (the measured pose when commanding begins)."""
+        self.previous = np.clip(np.asarray(current, dtype=np.float64), self.lower, self.upper)
+
+    def __call__(self, target: np.ndarray) -> np.ndarray:
+        clamped = np.clip(target, self.lower, self.upper)
+        self.last_clamped = clamped != target
+        shaped = clamped
+        if self.previous is not None:
+            shaped = np.clip(clamped, self.previous - self.max_step, self.previous + self.max_step)
+            shaped = np.clip(shaped, self.lower, self.upper)
+        self.last_rate_limited = shaped != clamped
+        self.clamped_ticks += bool(self.last_clamped.any())
+        self.rate_limited_ticks += bool(self.last_rate_limited.any())
+        self.previous = shaped
+        return shaped
+
+
+def command_within_limits(q: np.ndarray, kp: np.ndarray, kd: np.ndarray, tau: np.ndarray,
+                          contract: PolicyContract) -> bool:
+    """Last line of defence before the body: finite, inside joint limits, non-negative gains, |tau| <= effort."""
+    n = len(q)
+    arrays_ok = all(np.all(np.isfinite(a)) for a in (q, kp, kd, tau))
+    return bool(
+        arrays_ok
+        and np.all(q >= contract.joint_lower[:n])
+        and np.all(q <= contract.joint_upper[:n])
+        and np.all(kp >= 0)
+        and np.all(kd >= 0)
+        and np.all(np.abs(tau) <= contract.effort_limit[:n])
+    )
