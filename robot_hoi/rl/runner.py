@@ -173,12 +173,13 @@ class OnPolicyRunner:
 
     @torch.no_grad()
     def _rollout(self) -> dict[str, float]:
-        sums: dict[str, float] = {}
+        sums: dict[str, Any] = {}
         counts: dict[str, int] = {}
 
         def add(name: str, value: Any) -> None:
+            # Tensor values stay on their device until the end of the rollout: no GPU sync per step.
             if isinstance(value, Tensor):
-                total, n = float(value.float().sum()), int(value.numel())
+                total, n = value.detach().float().sum(), value.numel()
             else:
                 total, n = float(value), 1
             if n:
@@ -213,7 +214,7 @@ class OnPolicyRunner:
             for name, value in extras.get("episode_done", {}).items():
                 add(f"Episode/{name}", value)
         self.alg.compute_returns(concat_groups(self._obs, critic_groups))
-        return {name: sums[name] / counts[name] for name in sums}
+        return {name: float(sums[name]) / counts[name] for name in sums}
 
     def mean_return(self) -> float:
         """Mean undiscounted return of the last `episode_window` finished episodes (nan before any finished)."""

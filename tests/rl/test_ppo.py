@@ -138,3 +138,16 @@ def test_minibatch_size_larger_than_rollout_is_rejected():
     alg = PPO(model, PPOConfig(horizon=4, minibatch_size=16384))
     with pytest.raises(ValueError, match="minibatch"):
         alg.init_storage(8, 3, 4, 2, {})
+
+
+def test_given_actions_are_stored_with_their_log_probability():
+    """Distillation executes teacher actions at times: act(actions=...) must record exactly those."""
+    alg = _ppo(num_envs=4, horizon=1)
+    alg.model.eval()
+    obs = torch.randn(4, 3)
+    chosen = torch.tensor([[0.3, -0.2]]).repeat(4, 1)
+    out = alg.act(obs, torch.randn(4, 4), actions=chosen)
+    alg.process_env_step(torch.zeros(4), torch.zeros(4, dtype=torch.bool), torch.zeros(4, dtype=torch.bool))
+    assert torch.equal(out, chosen) and torch.equal(alg.storage.actions[0], chosen)
+    dist = alg.model.distribution_normalized(alg.model.normalize_actor_obs(obs))
+    assert torch.allclose(alg.storage.log_probs[0], dist.log_prob(chosen).sum(-1), atol=1e-6)

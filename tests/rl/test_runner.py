@@ -41,10 +41,10 @@ def test_runner_learns_reach_task():
     runner, memory = _runner()
     result = runner.learn(Budget(iterations=30))
     returns = [v for _, v in memory.scalars["Train/mean_return"]]
-    # A random policy wanders off (returns around -10); reaching and holding the target scores ~26 of 32.
-    assert returns[0] < 0.0
+    # A random policy wanders off (first-iteration returns -13 .. 7 over seeds); reaching and holding the target
+    # scores ~26 of at most 32.
     assert result["mean_return"] > 20.0
-    assert result["mean_return"] > returns[0] + 20.0
+    assert result["mean_return"] > returns[0] + 10.0
     assert result["iterations"] == 30 and result["samples"] == 30 * 16 * 64
     # env "log" scalars and per-episode stats are aggregated and written
     assert "Episode_Reward/progress" in memory.scalars and "Metrics/within_0.1" in memory.scalars
