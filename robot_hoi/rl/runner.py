@@ -115,6 +115,9 @@ class OnPolicyRunner:
         """Actions executed in the rollout. Distillation overrides this to execute teacher actions at times."""
         return self.alg.act(actor_obs, critic_obs, extra_obs)
 
+    def _on_iteration_start(self) -> None:
+        """Called before each rollout (self.iteration = iterations done). Distillation sets its w schedule here."""
+
     # --- training ----------------------------------------------------------------------------------------------
     def learn(self, budget: Budget) -> dict[str, float]:
         """Train until `budget` (counted from this call) is used up; checkpoints periodically and at the end."""
@@ -139,6 +142,7 @@ class OnPolicyRunner:
         with progress:
             task = progress.add_task(f"PPO, budget {budget.describe()}", total=1000)
             while True:
+                self._on_iteration_start()
                 t0 = time.monotonic()
                 env_logs = self._rollout()
                 t1 = time.monotonic()

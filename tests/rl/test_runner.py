@@ -138,3 +138,23 @@ def test_tensorboard_and_wall_budget(tmp_path):
     assert list(tmp_path.glob("events.out.tfevents.*"))
     lines = (tmp_path / "scalars.jsonl").read_text().splitlines()
     assert len(lines) == result["iterations"] and "Loss/value" in json.loads(lines[-1])
+
+
+def test_subclass_hooks_drive_the_rollout():
+    """The distillation runner's extension points: a per-iteration hook and the executed actions."""
+
+    class ZeroActionRunner(OnPolicyRunner):
+        started: list[int] = []
+
+        def _on_iteration_start(self) -> None:
+            self.started.append(self.iteration)
+
+        def _select_actions(self, actor_obs, critic_obs, extra_obs):
+            return self.alg.act(actor_obs, critic_obs, extra_obs, actions=torch.zeros(actor_obs.shape[0], 2))
+
+    cfg = load_train_config(FAST_PPO_CONFIG, TINY)
+    runner = ZeroActionRunner(ReachEnv(num_envs=8, max_episode_length=32), cfg, None)
+    runner.learn(Budget(iterations=3))
+    assert runner.started == [0, 1, 2]
+    # standing still never leaves the arena: every episode runs to the time-out
+    assert set(runner.recent_lengths) == {32.0}
