@@ -126,8 +126,7 @@ class OnPolicyRunner:
         self.model.train()
         self._write_run_info()
         start = time.monotonic()
-        samples = iterations = 0
-        batch = self.alg.storage.batch_size
+        first_iteration, first_samples = self.iteration, self.total_samples
         progress = Progress(
             TextColumn("[bold]{task.description}"),
             BarColumn(),
@@ -139,41 +138,54 @@ class OnPolicyRunner:
             transient=False,
         )
         last_saved = -1
-        with progress:
-            task = progress.add_task(f"PPO, budget {budget.describe()}", total=1000)
-            while True:
-                self._on_iteration_start()
-                t0 = time.monotonic()
-                env_logs = self._rollout()
-                t1 = time.monotonic()
-                stats = self.alg.update()
-                t2 = time.monotonic()
-                self.iteration += 1
-                iterations += 1
-                samples += batch
-                self.total_samples += batch
-                self.total_time_s += t2 - t0
-                self._log(stats, env_logs, collection_s=t1 - t0, learning_s=t2 - t1)
-                if self.iteration % self.cfg.runner.save_interval == 0:
-                    self._save_periodic()
-                    last_saved = self.iteration
-                elapsed = time.monotonic() - start
-                progress.update(
-                    task,
-                    completed=int(1000 * budget.fraction_done(elapsed, samples, iterations)),
-                    description=self._progress_text(batch / max(t2 - t0, 1e-9)),
-                )
-                if budget.exhausted(elapsed, samples, iterations):
-                    break
+        try:
+            with progress:
+                task = progress.add_task(f"PPO, budget {budget.describe()}", total=1000)
+                last_saved = self._train_loop(budget, progress, task, start)
+        except KeyboardInterrupt:
+            self._save_periodic()  # keep what was learnt; the interrupted rollout is simply dropped
+            self.alg.storage.clear()
+            raise
         if last_saved != self.iteration:
             self._save_periodic()
         self.logger.flush()
         return {
-            "iterations": float(iterations),
-            "samples": float(samples),
+            "iterations": float(self.iteration - first_iteration),
+            "samples": float(self.total_samples - first_samples),
             "wall_s": time.monotonic() - start,
             "mean_return": self.mean_return(),
         }
+
+    def _train_loop(self, budget: Budget, progress: Progress, task, start: float) -> int:
+        """Iterate until the budget is spent; returns the iteration of the last periodic checkpoint (-1: none)."""
+        batch = self.alg.storage.batch_size
+        samples = iterations = 0
+        last_saved = -1
+        while True:
+            self._on_iteration_start()
+            t0 = time.monotonic()
+            env_logs = self._rollout()
+            t1 = time.monotonic()
+            stats = self.alg.update()
+            t2 = time.monotonic()
+            self.iteration += 1
+            iterations += 1
+            samples += batch
+            self.total_samples += batch
+            self.total_time_s += t2 - t0
+            self._log(stats, env_logs, collection_s=t1 - t0, learning_s=t2 - t1)
+            if self.iteration % self.cfg.runner.save_interval == 0:
+                self._save_periodic()
+                last_saved = self.iteration
+            elapsed = time.monotonic() - start
+            progress.update(
+                task,
+                completed=int(1000 * budget.fraction_done(elapsed, samples, iterations)),
+                description=self._progress_text(batch / max(t2 - t0, 1e-9)),
+            )
+            if budget.exhausted(elapsed, samples, iterations):
+                break
+        return last_saved
 
     @torch.no_grad()
     def _rollout(self) -> dict[str, float]:

@@ -158,3 +158,17 @@ def test_subclass_hooks_drive_the_rollout():
     assert runner.started == [0, 1, 2]
     # standing still never leaves the arena: every episode runs to the time-out
     assert set(runner.recent_lengths) == {32.0}
+
+
+def test_interrupt_saves_a_checkpoint_and_reraises(tmp_path):
+    class InterruptedRunner(OnPolicyRunner):
+        def _on_iteration_start(self) -> None:
+            if self.iteration == 2:
+                raise KeyboardInterrupt
+
+    cfg = load_train_config(FAST_PPO_CONFIG, TINY)
+    runner = InterruptedRunner(ReachEnv(num_envs=8), cfg, tmp_path)
+    with pytest.raises(KeyboardInterrupt):
+        runner.learn(Budget(iterations=10))
+    runner.close()
+    assert read_checkpoint(tmp_path / "model_2.pt")["iteration"] == 2
