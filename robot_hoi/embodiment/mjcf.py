@@ -125,11 +125,13 @@ def build_robot_spec(
     self_collision: bool | None = None,
     floor: bool = True,
     visual_meshes: bool = False,
+    fixed_base: bool = False,
 ) -> mujoco.MjSpec:
     """The robot as an editable MjSpec (others add objects to it before compiling).
 
     self_collision: None = cfg.self_collision. visual_meshes: add Unitree's STL meshes (viewer only, no mass, no
     contacts) when the reference mesh folder exists; the resulting spec then refers to files outside the repo.
+    fixed_base: weld the pelvis at spawn height (no free joint), e.g. to look at the robot or test the hands.
     """
     desc: RobotDescription = cfg.description()
     self_collision = cfg.self_collision if self_collision is None else self_collision
@@ -137,7 +139,9 @@ def build_robot_spec(
     spec.modelname = cfg.name
     spec.compiler.degree = False
     spec.compiler.autolimits = True
-    spec.compiler.inertiafromgeom = mujoco.mjtInertiaFromGeom.mjINERTIAFROMGEOM_FALSE
+    # AUTO: robot bodies carry explicit inertials (their geoms have density 0); objects others add to this spec
+    # may still get their inertia from their geoms.
+    spec.compiler.inertiafromgeom = mujoco.mjtInertiaFromGeom.mjINERTIAFROMGEOM_AUTO
     spec.option.timestep = cfg.physics_dt
     spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
     spec.stat.center = [0.0, 0.0, 0.7]
@@ -157,7 +161,8 @@ def build_robot_spec(
         bodies[b.name] = _add_body(bodies[b.parent], b, bits, mesh_dir)
     base = bodies[desc.bodies[0].name]
     base.pos = [0.0, 0.0, cfg.spawn_height]
-    base.add_freejoint(name=desc.base_joint)
+    if not fixed_base:
+        base.add_freejoint(name=desc.base_joint)
 
     for j in desc.passive_joints:
         spec.add_equality(
@@ -183,7 +188,8 @@ def build_robot_spec(
         actuator.forcerange = [-joint.effort, joint.effort]
 
     hinge_names = [b.joint.name for b in desc.bodies if b.joint is not None]
-    spec.add_key(name=DEFAULT_KEYFRAME, qpos=default_qpos(cfg, hinge_names).tolist(),
+    qpos = default_qpos(cfg, hinge_names)
+    spec.add_key(name=DEFAULT_KEYFRAME, qpos=(qpos[7:] if fixed_base else qpos).tolist(),
                  ctrl=cfg.default_pos.tolist())
     return spec
 
