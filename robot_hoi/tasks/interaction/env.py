@@ -80,7 +80,7 @@ class InteractionEnv:
         lengths = torch.tensor([r.num_frames for r in references])
         self.clip_start = torch.cumsum(lengths, 0) - lengths
         self.clip_end = self.clip_start + lengths - 1
-        self.object_points = references[0].object_points
+        self.object_points = _subsample(references[0].object_points, self.cfg.object_surface_points)
         wrists = [self.layout.link_names.index(n) for n in ("left_wrist_yaw_link", "right_wrist_yaw_link")]
         self.ref_hand_distance = self.ref_d_hat[:, wrists].norm(dim=-1)
         self.total_frames = int(lengths.sum())
@@ -306,3 +306,10 @@ class InteractionEnv:
     def _observations(self) -> dict[str, Tensor]:
         policy = obs_terms.teacher_observation(self)
         return {"policy": policy, "critic": torch.cat([policy, obs_terms.critic_extras(self)], dim=-1)}
+
+
+def _subsample(points: Tensor, count: int) -> Tensor:
+    """Evenly strided subset of the surface samples (deterministic), for a cheaper d_t."""
+    if count <= 0 or points.shape[0] <= count:
+        return points
+    return points[torch.linspace(0, points.shape[0] - 1, count).round().long()]

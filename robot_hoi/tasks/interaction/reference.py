@@ -43,9 +43,9 @@ class ReferenceMotion:
 
 def nearest_surface_vectors(link_pos: Tensor, points_world: Tensor) -> Tensor:
     """Vectors from each link to its nearest object surface sample: (..., L, 3) and (..., P, 3) -> (..., L, 3)."""
-    diff = points_world.unsqueeze(-3) - link_pos.unsqueeze(-2)          # (..., L, P, 3)
-    idx = diff.square().sum(-1).argmin(-1)                                # (..., L)
-    return torch.gather(diff, -2, idx[..., None, None].expand(*idx.shape, 1, 3)).squeeze(-2)
+    idx = torch.cdist(link_pos, points_world).argmin(-1)                  # (..., L)
+    nearest = torch.gather(points_world, -2, idx[..., None].expand(*idx.shape, 3))
+    return nearest - link_pos
 
 
 def finite_difference(x: np.ndarray, fps: float) -> np.ndarray:
