@@ -203,3 +203,35 @@ def test_mjcf_text_loads_standalone(cfg, tmp_path):
     loaded = mujoco.MjModel.from_xml_path(str(path))
     assert (loaded.nq, loaded.nv, loaded.nu, loaded.neq) == (60, 59, 41, 12)
     assert loaded.key(DEFAULT_KEYFRAME).id == 0
+
+
+def test_urdf_collision_shapes_match_the_mjcf(model):
+    """Each capsule's URDF cylinder has the capsule's centre, axis, radius and length; boxes/spheres match."""
+    urdf_model = mujoco.MjModel.from_xml_path(str(COMMITTED_URDF))
+    d_urdf, d_mjcf = mujoco.MjData(urdf_model), mujoco.MjData(model)
+    mujoco.mj_kinematics(urdf_model, d_urdf)
+    mujoco.mj_kinematics(model, d_mjcf)
+    pelvis_u, pelvis_m = urdf_model.body("pelvis").id, model.body("pelvis").id
+
+    def local(data, pelvis, pos, mat):
+        rot = data.xmat[pelvis].reshape(3, 3).T
+        return rot @ (pos - data.xpos[pelvis]), rot @ mat.reshape(3, 3)
+
+    checked = 0
+    for g in range(model.ngeom):
+        name = model.geom(g).name
+        if not name or name == "floor":
+            continue
+        u = urdf_model.geom(name).id
+        pos_m, mat_m = local(d_mjcf, pelvis_m, d_mjcf.geom_xpos[g], d_mjcf.geom_xmat[g])
+        pos_u, mat_u = local(d_urdf, pelvis_u, d_urdf.geom_xpos[u], d_urdf.geom_xmat[u])
+        np.testing.assert_allclose(pos_u, pos_m, atol=1e-6, err_msg=name)
+        if model.geom_type[g] == mujoco.mjtGeom.mjGEOM_CAPSULE:
+            assert urdf_model.geom_type[u] == mujoco.mjtGeom.mjGEOM_CYLINDER
+            assert abs(abs(mat_u[:, 2] @ mat_m[:, 2]) - 1.0) < 1e-9, name  # same axis
+            np.testing.assert_allclose(urdf_model.geom_size[u][:2], model.geom_size[g][:2], atol=1e-6)
+        else:
+            assert urdf_model.geom_type[u] == model.geom_type[g]
+            np.testing.assert_allclose(urdf_model.geom_size[u], model.geom_size[g], atol=1e-6)
+        checked += 1
+    assert checked == model.ngeom - 1 == 39  # every robot geom (all but the floor)
