@@ -94,11 +94,10 @@ def _add_body(parent: mujoco.MjsBody, b: BodySpec, bits: tuple[int, int], mesh_d
             density=0.0,
         )
         if g.type == "capsule":
-            geom = body.add_geom(**kwargs, size=[g.size[0], 0.0, 0.0], fromto=list(g.fromto))
+            body.add_geom(**kwargs, size=[g.size[0], 0.0, 0.0], fromto=list(g.fromto))
         else:
-            geom = body.add_geom(**kwargs, size=list(g.size) + [0.0] * (3 - len(g.size)), pos=list(g.pos),
-                                 quat=list(g.quat_wxyz))
-        del geom
+            body.add_geom(**kwargs, size=list(g.size) + [0.0] * (3 - len(g.size)), pos=list(g.pos),
+                          quat=list(g.quat_wxyz))
     for s in b.sites:
         body.add_site(name=s.name, pos=list(s.pos), size=[0.006, 0.0, 0.0], group=SITE_GROUP, rgba=list(_SITE_RGBA))
     if mesh_dir is not None:
