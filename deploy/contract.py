@@ -6,7 +6,8 @@ Graph
     Observation and action normalisation are baked into the graph: the runtime feeds raw observation terms and
     reads raw actions.
 
-Metadata (``metadata_props``; every value is a JSON-encoded string)
+Metadata (``metadata_props``; every value is a JSON-encoded string; for the four plain-string keys a bare,
+unquoted string is accepted too)
     robot_hoi.contract  "1"                    contract version this file follows
     robot_hoi.version   str                    robot-hoi version that wrote the file
     embodiment          str                    e.g. "g1_inspire"
@@ -65,6 +66,7 @@ PER_ACTUATOR_KEYS = (
     "joint_upper",
     "effort_limit",
 )
+STRING_KEYS = ("robot_hoi.contract", "robot_hoi.version", "embodiment", "policy_kind")
 REQUIRED_KEYS = (
     "robot_hoi.contract",
     "robot_hoi.version",
@@ -273,6 +275,9 @@ def _parse(metadata: dict[str, str], source: str) -> PolicyContract:
         try:
             values[key] = json.loads(metadata[key])
         except (TypeError, json.JSONDecodeError):
+            if key in STRING_KEYS and isinstance(metadata[key], str):
+                values[key] = metadata[key]  # a bare string is unambiguous for these keys; accept it
+                continue
             raise fail(key, f"is not valid JSON: {metadata[key]!r:.80}") from None
 
     if str(values["robot_hoi.contract"]) != CONTRACT_VERSION:

@@ -168,10 +168,12 @@ def make_motion(contract: PolicyContract, duration_s: float = 4.0) -> ReferenceM
         add(f"{side}_elbow_joint", -0.4 * np.sin(np.pi * phase))
         add(f"{side}_shoulder_roll_joint", sign * 0.1 * np.sin(2 * np.pi * phase))
     add("waist_yaw_joint", 0.15 * np.sin(2 * np.pi * phase))
-    grasp_units = 1000.0 - 700.0 * np.clip((phase - 0.2) / 0.3, 0.0, 1.0)  # open -> 30 %, then hold
+    grasp = np.clip((phase - 0.2) / 0.3, 0.0, 1.0)[:, None]  # default pose -> 30 % open, then hold
     for side in HAND_SIDES:
         open_rad, closed_rad = channel_arrays(contract.hands[side])
-        q[:, contract.hand_slice(side)] = units_to_rad(grasp_units[:, None], open_rad, closed_rad)
+        hand = contract.hand_slice(side)
+        grasped = units_to_rad(np.full(len(open_rad), 300.0), open_rad, closed_rad)
+        q[:, hand] = contract.default_pose[hand] + grasp * (grasped - contract.default_pose[hand])
     q = np.clip(q, contract.joint_lower, contract.joint_upper)
 
     yaw = 0.2 * np.sin(2 * np.pi * phase)

@@ -16,6 +16,7 @@ A tick, in order:
 from __future__ import annotations
 
 import math
+import sys
 import threading
 from dataclasses import dataclass
 
@@ -67,6 +68,7 @@ class Runtime:
         events: EventLog | None = None,
         recorder: TickRecorder | None = None,
         rate_hz: float | None = None,
+        gil_switch_interval_s: float | None = 2e-4,
     ):
         self.contract = contract
         self.policy = policy
@@ -80,6 +82,9 @@ class Runtime:
         self.events = events or EventLog(self.clock)
         self.recorder = recorder or TickRecorder(None)
         self.dt = 1.0 / rate_hz if rate_hz else contract.control_dt
+        # The hand I/O threads and simulated devices share the GIL with the loop; Python's default 5 ms switch
+        # interval would let them delay a wake-up by milliseconds. run() shortens it while it runs.
+        self.gil_switch_interval_s = gil_switch_interval_s
         self.num_body = contract.num_body
         self.needs_tracker = contract.uses_reference or contract.uses_object
         self.shaper = TargetShaper(contract, self.dt, self.safety.max_target_rate)
@@ -109,7 +114,8 @@ class Runtime:
 
     # ------------------------------------------------------------------ operator hooks (thread / signal safe)
     def request_start(self) -> None:
-        self._start_requested = True
+        """Start the policy if the runtime is in HOLD (ignored in other phases)."""
+        self._start_requested = self.phase == Phase.HOLD
 
     def request_estop(self, reason: str = "e-stop") -> None:
         """DAMP at the next tick, then exit; a second request aborts right after one damping command."""
@@ -137,7 +143,11 @@ class Runtime:
         for event in self.operator.poll():
             self.events.log("operator", tick=self.ticks, phase=self.phase.name, request=event)
             if event == "start":
-                self._start_requested = True
+                if self.phase == Phase.HOLD:
+                    self._start_requested = True
+                else:  # a start pressed during the ramp must not fire later by surprise
+                    self.events.log("start_ignored", tick=self.ticks, phase=self.phase.name,
+                                    reason="the policy starts only from HOLD")
             elif event == "stop":
                 self._stop_reason = "operator stop"
             elif event == "estop":
@@ -192,8 +202,7 @@ class Runtime:
         elif self.phase == Phase.HOLD:
             target = self.contract.default_pose.copy()
             if self._can_start(now, poses):
-                self._enter(Phase.POLICY, "operator start" if self.safety.auto_start_after_s is None
-                            else "auto start", now)
+                self._enter(Phase.POLICY, "operator start" if self._start_requested else "auto start", now)
                 self._policy_deadline0 = deadline
                 self.last_action = np.zeros(self.contract.num_actions)
         if self.phase == Phase.POLICY:
@@ -355,6 +364,9 @@ class Runtime:
         self.phase_since = start
         deadline = start
         previous_wake = None
+        previous_interval = sys.getswitchinterval()
+        if self.gil_switch_interval_s is not None:
+            sys.setswitchinterval(self.gil_switch_interval_s)
         self.events.log("start", rate_hz=1.0 / self.dt, policy=self.contract.source, duration_s=duration_s)
         try:
             while True:
@@ -390,6 +402,7 @@ class Runtime:
                 self.exit_reason = self.exit_reason or f"crashed: {type(exc).__name__}"
             raise
         finally:
+            sys.setswitchinterval(previous_interval)
             end = clock.now()
             self.phase_time[self.phase.name] = self.phase_time.get(self.phase.name, 0.0) + (end - self.phase_since)
             self.phase_since = end

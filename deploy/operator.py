@@ -1,9 +1,10 @@
 """Operator input for the runtime: start the policy from HOLD, stop, e-stop.
 
 `poll()` returns the events that arrived since the last call: "start", "stop" (end the run through DAMP) or
-"estop" (DAMP now). Implementations: `AutoStart` (dry runs: start as soon as HOLD allows), `KeyboardOperator`
-(a thread reading lines on stdin: Enter or "s" = start, "q" = stop, "x"/"e" = e-stop), `ScriptedOperator`
-(events at given clock times, for tests). SIGINT is wired to Runtime.request_estop by the CLI.
+"estop" (DAMP now). A "start" outside HOLD is ignored. Implementations: `OperatorInput` (no operator: dry runs
+with SafetyConfig.auto_start_after_s), `KeyboardOperator` (a thread reading lines on stdin: Enter or "s" = start,
+"q" = stop, "x"/"e" = e-stop), `ScriptedOperator` (events at given clock times, for tests). SIGINT is wired to
+Runtime.request_estop by the CLI.
 """
 
 from __future__ import annotations
@@ -23,19 +24,6 @@ class OperatorInput:
 
     def close(self) -> None:
         return None
-
-
-class AutoStart(OperatorInput):
-    """Asks to start once; the runtime honours it in HOLD after SafetyConfig.auto_start_after_s."""
-
-    def __init__(self):
-        self._sent = False
-
-    def poll(self) -> list[str]:
-        if self._sent:
-            return []
-        self._sent = True
-        return ["start"]
 
 
 class ScriptedOperator(OperatorInput):

@@ -1,0 +1,129 @@
+"""`robot-hoi deploy` (and `python -m deploy`): run a policy on the robot, or a dry run against simulated IO.
+
+Only argparse here; the runtime is imported inside the handler so `robot-hoi --help` stays fast.
+"""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+
+EPILOG = """examples:
+  robot-hoi deploy --dry-run --policy policies/dev.onnx --duration 5 --auto-start
+  robot-hoi deploy --dry-run --policy policies/dev.onnx --hand-bus can --auto-start
+  robot-hoi deploy --dry-run --policy P.onnx --hand-bus serial --hand-port /dev/ttyUSB2 /dev/ttyUSB1   (hands bench)
+  robot-hoi deploy --policy P.onnx --dds-interface eth0 --hand-port /dev/ttyUSB2 /dev/ttyUSB1 --tracker-port 9870
+operator (real runs): Enter = start the policy from HOLD, q = stop, x = e-stop; Ctrl-C = DAMP then exit."""
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--policy", required=True, help="ONNX policy file following the deploy contract")
+    p.add_argument("--motion", default=None, help="reference motion .motion.npz (default: the policy's sidecar)")
+    p.add_argument("--embodiment", default="g1_inspire", help="embodiment name or YAML path (default g1_inspire)")
+    p.add_argument("--dry-run", action="store_true",
+                   help="simulated body + tracker; simulated hands unless real hand ports are given")
+    p.add_argument("--duration", type=float, default=None, help="run this many seconds, then DAMP and exit")
+    p.add_argument("--rate", type=float, default=None, help="loop rate in Hz (default 1/control_dt; dry runs only)")
+    p.add_argument("--log-dir", default=None, help="where events.jsonl, ticks/ and summary.json go")
+    p.add_argument("--auto-start", action="store_true", help="start the policy from HOLD without the operator")
+    hands = p.add_argument_group("hands")
+    hands.add_argument("--hand-bus", choices=("serial", "modbus", "can"), default="serial")
+    hands.add_argument("--hand-port", nargs=2, metavar=("LEFT", "RIGHT"), default=None,
+                       help="serial/modbus ports of the left and right hands")
+    hands.add_argument("--hand-id", nargs=2, type=int, metavar=("LEFT", "RIGHT"), default=None,
+                       help="hand ids (default 1 1 on serial/modbus, 1 2 on CAN)")
+    hands.add_argument("--can-channel", default=None, help="CAN channel, e.g. can0")
+    hands.add_argument("--can-interface", default=None, help="python-can interface (default socketcan)")
+    hands.add_argument("--hand-timeout", type=float, default=None, help="seconds per bus try (default per transport)")
+    hands.add_argument("--hand-retries", type=int, default=2, help="extra tries per bus request (default 2)")
+    hands.add_argument("--hand-safe-state", choices=("hold", "open"), default="hold",
+                       help="on a fault: hold the last pose (default; a held box is not dropped) or open")
+    hands.add_argument("--hand-force-limit", type=int, default=1000, help="FORCE_SET, grams at the fingertip")
+    hands.add_argument("--hand-speed", type=int, default=1000, help="SPEED_SET 0..1000")
+    body = p.add_argument_group("body and tracker")
+    body.add_argument("--body", choices=("sim", "dds"), default=None,
+                      help="sim (dry-run default) or dds (robot default; in a dry run: a loopback DDS robot)")
+    body.add_argument("--dds-interface", default=None, help="network interface to the robot, e.g. eth0")
+    body.add_argument("--dds-domain", type=int, default=0)
+    body.add_argument("--tracker", choices=("sim", "replay", "udp"), default=None,
+                      help="pose source (dry-run default sim, robot default udp)")
+    body.add_argument("--tracker-host", default="127.0.0.1", help="UDP bind address (0.0.0.0: any)")
+    body.add_argument("--tracker-port", type=int, default=9870)
+    safety = p.add_argument_group("safety timing")
+    safety.add_argument("--zero-torque-s", type=float, default=None, help="ZERO_TORQUE duration (default 0.5)")
+    safety.add_argument("--ramp-s", type=float, default=None, help="RAMP_TO_DEFAULT duration (default 2.0)")
+    safety.add_argument("--damp-s", type=float, default=None, help="DAMP duration before exit (default 1.0)")
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser(
+        "deploy",
+        help="run an ONNX policy on the G1 + Inspire hands (or --dry-run against simulated IO)",
+        description=__doc__.splitlines()[0],
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    add_arguments(p)
+    p.set_defaults(func=handler)
+
+
+def options_from_args(args: argparse.Namespace):
+    from deploy.safety import SafetyConfig
+    from deploy.session import DeployOptions
+
+    safety = SafetyConfig()
+    for name in ("zero_torque_s", "ramp_s", "damp_s"):
+        value = getattr(args, name)
+        if value is not None:
+            setattr(safety, name, value)
+    return DeployOptions(
+        policy=args.policy, motion=args.motion, embodiment=args.embodiment, dry_run=args.dry_run,
+        hand_bus=args.hand_bus, hand_ports=args.hand_port, hand_ids=args.hand_id, can_channel=args.can_channel,
+        can_interface=args.can_interface, hand_timeout=args.hand_timeout, hand_retries=args.hand_retries,
+        hand_safe_state=args.hand_safe_state, hand_force_limit=args.hand_force_limit, hand_speed=args.hand_speed,
+        body=args.body, dds_interface=args.dds_interface, dds_domain=args.dds_domain, tracker=args.tracker,
+        tracker_host=args.tracker_host, tracker_port=args.tracker_port, duration=args.duration, rate=args.rate,
+        log_dir=args.log_dir, auto_start=args.auto_start, safety=safety,
+    )
+
+
+def handler(args: argparse.Namespace) -> int:
+    import logging
+
+    from deploy.session import Session, format_summary
+
+    logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
+    options = options_from_args(args)
+    with Session(options) as session:
+        previous = signal.getsignal(signal.SIGINT)
+        signal.signal(signal.SIGINT, lambda *_: session.runtime.request_estop("SIGINT"))
+        try:
+            summary = session.run()
+        finally:
+            signal.signal(signal.SIGINT, previous)
+        path = session.write_summary(summary)
+    mode = "dry run" if options.dry_run else "robot"
+    print(f"deploy ({mode}): {options.policy}")
+    print(format_summary(summary))
+    print(f"  {'summary':<17} {path}")
+    return 1 if summary["faults"] else 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point for `python -m deploy` on a robot without robot_hoi installed."""
+    parser = argparse.ArgumentParser(prog="python -m deploy", description=__doc__.splitlines()[0], epilog=EPILOG,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    add_arguments(parser)
+    args = parser.parse_args(argv)
+    try:
+        return handler(args)
+    except Exception as exc:
+        if getattr(exc, "user_error", False):
+            print(f"deploy: error: {exc}", file=sys.stderr)
+            return 2
+        raise
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,279 @@
+"""Assemble a runtime from command-line options: policy + motion, body, tracker, hands, logs; run it; clean up.
+
+Dry run (`dry_run=True`): the numpy SimulatedBody (or, with body "dds", a DDS loopback robot on `lo`), the
+SimulatedTracker, and two simulated Inspire hands speaking the chosen transport's real bytes. Hands-only bench:
+a dry run given real hand ports (or a CAN channel) uses those instead; the runtime is the same. Real run: the DDS
+body, the UDP pose receiver and real hand ports are required, and the operator starts the policy from HOLD.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from deploy._atomic import atomic_write_text
+from deploy.clock import MonotonicClock
+from deploy.contract import check_against_embodiment
+from deploy.embodiment import resolve_embodiment_path
+from deploy.errors import DeployError
+from deploy.hand_pair import Hands
+from deploy.loop import Runtime
+from deploy.motion import load_motion
+from deploy.observations import ObservationBuilder
+from deploy.operator import KeyboardOperator, OperatorInput
+from deploy.policy import OnnxPolicy
+from deploy.runlog import EventLog, TickRecorder
+from deploy.safety import SafetyConfig
+
+HAND_TRANSPORTS = ("serial", "modbus", "can")
+
+
+@dataclass
+class DeployOptions:
+    policy: str
+    motion: str | None = None
+    embodiment: str = "g1_inspire"
+    dry_run: bool = False
+    hand_bus: str = "serial"
+    hand_ports: list[str] | None = None
+    hand_ids: list[int] | None = None
+    can_channel: str | None = None
+    can_interface: str | None = None
+    hand_timeout: float | None = None
+    hand_retries: int = 2
+    hand_safe_state: str = "hold"
+    hand_force_limit: int = 1000
+    hand_speed: int = 1000
+    hand_threads: bool = True
+    body: str | None = None  # "sim" | "dds"; default sim for dry runs, dds otherwise
+    dds_interface: str | None = None
+    dds_domain: int = 0
+    tracker: str | None = None  # "sim" | "replay" | "udp"; default sim for dry runs, udp otherwise
+    tracker_host: str = "127.0.0.1"
+    tracker_port: int = 9870
+    duration: float | None = None
+    rate: float | None = None
+    log_dir: str | None = None
+    auto_start: bool = False
+    safety: SafetyConfig = field(default_factory=SafetyConfig)
+
+
+class Session(contextlib.ExitStack):
+    """Everything a run needs, opened in order and closed in reverse (hands to their safe state first)."""
+
+    def __init__(self, options: DeployOptions):
+        super().__init__()
+        self.options = options
+        self.clock = MonotonicClock()
+        self.runtime: Runtime | None = None
+        self.description: dict = {}
+
+    def __enter__(self) -> Session:
+        super().__enter__()
+        try:
+            self._build()
+        except BaseException:
+            self.close()
+            raise
+        return self
+
+    # ---------------------------------------------------------------- building blocks
+    def _build(self) -> None:
+        o = self.options
+        if o.hand_bus not in HAND_TRANSPORTS:
+            raise DeployError(f"--hand-bus must be one of {', '.join(HAND_TRANSPORTS)}, got {o.hand_bus!r}")
+        policy = OnnxPolicy(o.policy)
+        contract = policy.contract
+        check_against_embodiment(contract, resolve_embodiment_path(o.embodiment))
+        motion = self._motion(contract)
+        rate = self._rate(contract)
+        log_dir = Path(o.log_dir) if o.log_dir else Path("runs") / "deploy" / time.strftime("%Y%m%d-%H%M%S")
+        log_dir.mkdir(parents=True, exist_ok=True)
+        self.log_dir = log_dir
+
+        body = self._body(contract)
+        tracker = self._tracker(motion)
+        if o.dry_run and hasattr(body, "imu_quat_source") and hasattr(tracker, "true_robot_quat_wxyz"):
+            body.imu_quat_source = tracker.true_robot_quat_wxyz  # one simulated world: IMU agrees with mocap
+        hands = self._hands(contract)
+
+        events = EventLog(self.clock, log_dir / "events.jsonl")
+        self.callback(events.close)
+        recorder = TickRecorder(log_dir)
+        self.callback(recorder.close)
+        if o.auto_start and not o.dry_run:
+            raise DeployError("--auto-start is only allowed with --dry-run; on the robot the operator starts")
+        safety = o.safety
+        if o.auto_start and safety.auto_start_after_s is None:
+            safety.auto_start_after_s = 0.5
+        operator = OperatorInput() if o.auto_start else KeyboardOperator()
+        self.runtime = Runtime(contract, policy, ObservationBuilder(contract, motion), body, tracker, hands,
+                               clock=self.clock, safety=safety, operator=operator, events=events,
+                               recorder=recorder, rate_hz=rate)
+        events.log("session", **self.description, log_dir=str(log_dir))
+
+    def _motion(self, contract):
+        o = self.options
+        if o.motion:
+            return load_motion(o.motion)
+        if contract.reference is not None:
+            path = contract.reference_path()
+            if not path.is_file():
+                raise DeployError(f"{contract.source}: reference sidecar {path} is missing (or pass --motion)")
+            return load_motion(path, expected_sha256=contract.reference.sha256)
+        return None
+
+    def _rate(self, contract) -> float:
+        o = self.options
+        native = 1.0 / contract.control_dt
+        if o.rate is None:
+            return native
+        if o.rate <= 0 or not math.isfinite(o.rate):
+            raise DeployError(f"--rate must be a positive number, got {o.rate}")
+        if not o.dry_run and not math.isclose(o.rate, native, rel_tol=1e-3):
+            raise DeployError(f"--rate {o.rate} Hz differs from the policy's {native:.3f} Hz; only a dry run may do that")
+        return o.rate
+
+    def _body(self, contract):
+        o = self.options
+        kind = o.body or ("sim" if o.dry_run else "dds")
+        self.description["body"] = kind
+        if kind == "sim":
+            if not o.dry_run:
+                raise DeployError("the simulated body is only for --dry-run")
+            from deploy.body.simulated import SimulatedBody
+
+            body = SimulatedBody(contract.num_body, clock=self.clock)
+        elif kind == "dds":
+            from deploy.body.unitree_dds import UnitreeDdsBody
+
+            interface = o.dds_interface
+            if o.dry_run:
+                from deploy.body.dds_loopback import DdsLoopbackRobot
+
+                interface = interface or "lo"
+                robot = DdsLoopbackRobot(o.dds_domain, interface, contract.num_body).start()
+                self.callback(robot.stop)
+                self.description["body"] = f"dds loopback robot on {interface}, domain {o.dds_domain}"
+            body = UnitreeDdsBody(contract.num_body, domain_id=o.dds_domain, interface=interface, clock=self.clock)
+        else:
+            raise DeployError(f"--body must be 'sim' or 'dds', got {kind!r}")
+        body.connect()
+        self.callback(body.close)
+        return body
+
+    def _tracker(self, motion):
+        o = self.options
+        kind = o.tracker or ("sim" if o.dry_run else "udp")
+        self.description["tracker"] = kind
+        if kind == "sim":
+            from deploy.tracking import SimulatedTracker
+
+            tracker = SimulatedTracker(motion, clock=self.clock)
+        elif kind == "replay":
+            from deploy.tracking import ReplayTracker
+
+            if motion is None:
+                raise DeployError("--tracker replay needs a motion (--motion or the policy's sidecar)")
+            tracker = ReplayTracker(motion, clock=self.clock)
+        elif kind == "udp":
+            from deploy.tracking_udp import UdpPoseReceiver
+
+            tracker = UdpPoseReceiver(o.tracker_host, o.tracker_port, clock=self.clock)
+            self.description["tracker"] = f"udp {o.tracker_host}:{o.tracker_port}"
+        else:
+            raise DeployError(f"--tracker must be sim, replay or udp, got {kind!r}")
+        tracker.connect()
+        self.callback(tracker.close)
+        return tracker
+
+    def _hands(self, contract) -> Hands:
+        from deploy.hands import make_hand_bus
+
+        o = self.options
+        transport = o.hand_bus
+        real_ports = bool(o.hand_ports) or bool(o.can_channel)
+        if not o.dry_run and not real_ports:
+            raise DeployError("a real run needs the hands: --hand-port LEFT RIGHT (serial/modbus) or --can-channel")
+        if o.hand_ports and len(o.hand_ports) != 2:
+            raise DeployError(f"--hand-port takes two ports (left, right), got {len(o.hand_ports)}")
+        if transport == "can" and o.hand_ports:
+            raise DeployError("--hand-bus can uses --can-channel, not --hand-port")
+        if transport != "can" and o.can_channel:
+            raise DeployError(f"--can-channel needs --hand-bus can (got {transport})")
+        hand_ids = o.hand_ids or ([1, 2] if transport == "can" else [1, 1])
+        if len(hand_ids) != 2:
+            raise DeployError(f"--hand-id takes two ids (left, right), got {hand_ids}")
+        common = {"retries": o.hand_retries, "safe_pose": o.hand_safe_state}
+        if o.hand_timeout is not None:
+            common["timeout"] = o.hand_timeout
+        buses = []
+        for i, side in enumerate(("left", "right")):
+            if real_ports:
+                if transport == "can":
+                    kwargs = {"can_channel": o.can_channel, "can_interface": o.can_interface or "socketcan"}
+                else:
+                    kwargs = {"port": o.hand_ports[i]}
+                kwargs["hand_id"] = hand_ids[i]
+            else:
+                from deploy.hands.simulated import start_simulated_hand
+
+                sim = start_simulated_hand(transport, side, hand_id=hand_ids[i])
+                self.callback(sim.stop)
+                kwargs = sim.bus_kwargs()
+            buses.append(make_hand_bus(transport, side, **kwargs, **common))
+        self.description["hands"] = f"{transport} ({'real ports' if real_ports else 'simulated devices'})"
+        hands = Hands(buses[0], buses[1], contract.hands, clock=self.clock,
+                      force_limits=[o.hand_force_limit] * 6, speeds=[o.hand_speed] * 6,
+                      safe_state=o.hand_safe_state, threaded=o.hand_threads)
+        self.callback(hands.close)  # registered before connect: a half-connected pair is still closed
+        hands.connect()
+        return hands
+
+    # ---------------------------------------------------------------- running
+    def run(self) -> dict:
+        summary = self.runtime.run(self.options.duration)
+        summary.update({"policy": str(self.options.policy), "dry_run": self.options.dry_run,
+                        "log_dir": str(self.log_dir), "setup": dict(self.description)})
+        return summary
+
+    def write_summary(self, summary: dict) -> Path:
+        path = self.log_dir / "summary.json"
+        atomic_write_text(path, json.dumps(summary, indent=2, default=str) + "\n")
+        return path
+
+
+def format_summary(summary: dict) -> str:
+    def ms(d: dict) -> str:
+        if d.get("p50") is None:
+            return "n/a"
+        return f"p50 {d['p50']:.3f} ms  p99 {d['p99']:.3f} ms  max {d['max']:.3f} ms"
+
+    phases = ", ".join(f"{k} {v:.2f} s" for k, v in summary["phase_time_s"].items())
+    hand_lines = []
+    for side, st in summary["hands"].items():
+        hand_lines.append(
+            f"{side}: {st['cycles']} cycles, {st.get('bus_retries', 0)} bus retries, {st['link_errors']} link errors, "
+            f"{st['reconnects']} reconnects, {st['fault_errors']} device faults, {st['late_cycles']} late"
+        )
+    rows = [
+        ("exit", summary["exit_reason"] or "-"),
+        ("final phase", summary["final_phase"]),
+        ("rate", f"{summary['rate_hz']:.1f} Hz"),
+        ("ticks", f"{summary['ticks']} (policy {summary['policy_steps']}), overruns {summary['overruns']}, "
+                  f"missed deadlines {summary['missed_deadlines']}"),
+        ("period error", ms(summary["period_error_ms"])),
+        ("wake-up lateness", ms(summary["lateness_ms"])),
+        ("compute", ms(summary["compute_ms"])),
+        ("phases", phases),
+        ("targets", f"{summary['clamped_ticks']} ticks clamped to limits, {summary['rate_limited_ticks']} rate limited"),
+        ("hands", "\n" + "\n".join(" " * 20 + line for line in hand_lines)),
+        ("faults", "; ".join(summary["faults"]) or "none"),
+        ("setup", ", ".join(f"{k}: {v}" for k, v in summary.get("setup", {}).items())),
+        ("log", summary.get("log_dir", "-")),
+    ]
+    return "\n".join(f"  {name:<17} {value}" for name, value in rows)
