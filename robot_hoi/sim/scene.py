@@ -52,9 +52,13 @@ def _hand_bodies(spec: mujoco.MjSpec, prefix: str) -> dict[str, str]:
 
 
 def add_object(spec: mujoco.MjSpec, vertices: np.ndarray, faces: np.ndarray, *, density: float, friction: float,
-               contype: int, conaffinity: int) -> None:
-    """The object as one convex hull of its mesh with a free joint (InterMimic: density 200, friction 0.9)."""
+               contype: int, conaffinity: int, mass: float | None = None) -> None:
+    """The object as one convex hull of its mesh with a free joint (InterMimic: density 200, friction 0.9).
+
+    `mass`, when known, overrides the density (the hull is solid; a real box is hollow and much lighter)."""
     hull = trimesh.Trimesh(vertices=vertices, faces=faces, process=True).convex_hull
+    if mass is not None:
+        density = mass / hull.volume
     mesh = spec.add_mesh(name="object_hull")
     mesh.uservert = np.asarray(hull.vertices, dtype=np.float32).ravel()
     mesh.userface = np.asarray(hull.faces, dtype=np.int32).ravel()

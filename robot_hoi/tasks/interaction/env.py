@@ -120,13 +120,16 @@ class InteractionEnv:
             self.episode_sums[name] += value
         self._accumulate_metrics()
 
-        terminated = self._terminations()
+        reasons = self._terminations()
+        terminated = torch.stack(list(reasons.values())).any(0)
         reached_end = self.ref_index >= self._clip_end()
         truncated = ~terminated & (reached_end | (self.episode_length >= self.max_episode_length))
         self.psi.observe(self, reward, terminated | truncated)
         done = terminated | truncated
         stats = self._episode_stats(done, terminated, reached_end)
         extras = {"log": self._episode_log(done, stats), "episode": stats}
+        if terminated.any():
+            extras["log"].update({f"Termination/{k}": v[terminated].float().mean().item() for k, v in reasons.items()})
         if truncated.any():
             extras["final_obs"] = self._observations()
         self.last_actions = self.actions.clone()
@@ -184,14 +187,16 @@ class InteractionEnv:
             hand_contact=self.ref_hand_contact[idx], hand_distance=self.ref_hand_distance[idx],
         )
 
-    def _terminations(self) -> Tensor:
+    def _terminations(self) -> dict[str, Tensor]:
         t = self.cfg.terminations
-        done = term_terms.link_deviation(self, t.max_mean_link_error)
-        done |= term_terms.root_too_low(self, t.min_root_height)
-        done |= term_terms.object_deviation(self, t.max_mean_object_point_error)
-        done |= term_terms.interaction_distance_deviation(self, t.max_interaction_distance_error)
-        done |= term_terms.contact_lost(self, t.max_contact_loss_frames)
-        return done
+        return {
+            "link_deviation": term_terms.link_deviation(self, t.max_mean_link_error),
+            "root_too_low": term_terms.root_too_low(self, t.min_root_height),
+            "object_deviation": term_terms.object_deviation(self, t.max_mean_object_point_error),
+            "interaction_distance": term_terms.interaction_distance_deviation(
+                self, t.max_interaction_distance_error),
+            "contact_lost": term_terms.contact_lost(self, t.max_contact_loss_frames),
+        }
 
     # ---- metrics ------------------------------------------------------------------------------------------------
     def _accumulate_metrics(self) -> None:

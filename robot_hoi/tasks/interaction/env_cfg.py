@@ -74,7 +74,8 @@ class InteractionEnvCfg:
     keyframes: tuple[int, ...] = (1, 16)    # teacher keyframes K (Sec. 4)
     warmup_frames: int = 15                 # stand-and-approach frames (supp. F)
     max_episode_frames: int = 300           # supp. Table C
-    object_density: float = 200.0           # kg/m^3 (supp. Table A)
+    reference_links: str = "ik"             # "ik" (robot-reachable link targets) | "scaled_human" (pure InterMimic)
+    object_density: float = 200.0           # kg/m^3 (supp. Table A); a clip object's own known mass wins
     object_friction: float = 0.9            # supp. Table A
     object_surface_points: int = 256        # samples for d_t
     self_collision: bool = False

@@ -98,7 +98,8 @@ def make_env(clips: list, env_cfg: InteractionEnvCfg, embodiment, cache: Path | 
         raise UserError(f"clip {clips[0].name}: no object mesh loaded; the simulation needs it")
     scene = InteractionScene(embodiment, clips[0].object, self_collision=env_cfg.self_collision,
                              density=env_cfg.object_density, friction=env_cfg.object_friction)
-    references = [build_reference(c, load_or_retarget(c, embodiment, cache)) for c in clips]
+    references = [build_reference(c, load_or_retarget(c, embodiment, cache), env_cfg.reference_links)
+                  for c in clips]
     return InteractionEnv(env_cfg, scene, references)
 
 

@@ -65,12 +65,19 @@ def angular_velocity_wxyz(quat_wxyz: np.ndarray, fps: float) -> np.ndarray:
     return omega
 
 
-def build_reference(clip, motion) -> ReferenceMotion:
+LINK_TARGETS = ("ik", "scaled_human")
+
+
+def build_reference(clip, motion, link_targets: str = "ik") -> ReferenceMotion:
     """ReferenceMotion from an HOIClip and its robot-space IK retarget (robot_hoi.retarget.RobotMotion).
 
-    Link position targets are the retarget's targets (scaled human, object-anchored near the object); link
-    orientations and full robot states come from the IK solution; the object track is the robot-space one.
+    link_targets "ik": link positions the retargeted robot actually reaches (feasible for the robot, so a
+    perfect policy earns the full position reward); "scaled_human": the retarget's targets themselves (scaled
+    human, object-anchored near the object), InterMimic's pure setting where RL absorbs the whole embodiment gap.
+    Link orientations and full robot states come from the IK solution; the object track is the robot-space one.
     """
+    if link_targets not in LINK_TARGETS:
+        raise ValueError(f"link_targets must be one of {LINK_TARGETS}, not {link_targets!r}")
     from robot_hoi.utils.torch_rot import quat_apply
 
     fps = float(motion.fps)
@@ -80,7 +87,7 @@ def build_reference(clip, motion) -> ReferenceMotion:
     points = t(clip.object.sample_points)
     obj_q = t(object_quat)
     points_world = quat_apply(obj_q[:, None, :], points[None]) + t(object_pos)[:, None, :]
-    link_pos = t(motion.target_pos)
+    link_pos = t(motion.link_pos if link_targets == "ik" else motion.target_pos)
     return ReferenceMotion(
         fps=fps,
         link_pos=link_pos,

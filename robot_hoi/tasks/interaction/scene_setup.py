@@ -23,7 +23,8 @@ class InteractionScene:
         spec = build_robot_spec(embodiment, self_collision=self_collision, floor=True)
         contype, conaffinity = world_bits()
         add_object(spec, np.asarray(object_asset.vertices), np.asarray(object_asset.faces), density=density,
-                   friction=friction, contype=contype, conaffinity=conaffinity)
+                   friction=friction, contype=contype, conaffinity=conaffinity,
+                   mass=getattr(object_asset, "mass_kg", None))
         contact_names = add_sensors(spec, dict(embodiment.link_map))
         if timestep is not None:
             spec.option.timestep = timestep
