@@ -1,0 +1,93 @@
+"""`robot-hoi retarget [CLIP] -o OUT.npz [--video OUT.mp4] [--json]`: kinematic IK retarget onto the robot."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser(
+        "retarget",
+        help="kinematic IK retarget of an HOI clip onto the robot (reference motion for the teachers)",
+        description="Map a human-object clip onto the robot: scaled body, real-size object, hands anchored to "
+        "the object, per-frame damped-least-squares IK. Writes OUT.npz + OUT.json and prints the residuals.",
+    )
+    p.add_argument("clip", nargs="?", help="clip file (.pt InterMimic or .npz native); default: the embedded "
+                   "synthetic lift-and-carry clip")
+    p.add_argument("--embodiment", default="g1_inspire", help="embodiment name or YAML path (default g1_inspire)")
+    p.add_argument("-o", "--output", required=True, help="motion file to write (.npz; a .json sidecar goes next to it)")
+    p.add_argument("--video", help="also write an mp4 of the retargeted motion")
+    p.add_argument("--video-backend", choices=("auto", "mujoco", "matplotlib"), default="auto",
+                   help="auto: MuJoCo offscreen (EGL, then OSMesa) if it works, else a matplotlib stick figure")
+    p.add_argument("--pretty", action="store_true", help="video with Unitree meshes and shadows (slow on CPU GL)")
+    p.add_argument("--video-stride", type=int, default=1, help="render every Nth frame (default 1)")
+    p.add_argument("--scale", type=float, help="human->robot scale (default robot_height / subject height)")
+    p.add_argument("--anchor-mode", choices=("distance", "contact"), default="distance",
+                   help="anchor weights from the distance to the object (default) or from the clip's contact labels")
+    p.add_argument("--objects-dir", help="object meshes folder for .pt clips (default <clip dir>/../objects)")
+    p.add_argument("--json", action="store_true", help="print the report as JSON on stdout")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from robot_hoi.errors import UserError
+
+    out = Path(args.output)
+    if out.suffix != ".npz":
+        raise UserError(f"{out}: the motion file must end in .npz")
+    if args.video and Path(args.video).suffix != ".mp4":
+        raise UserError(f"{args.video}: the video must end in .mp4")
+    if args.video_stride < 1:
+        raise UserError(f"--video-stride must be >= 1, got {args.video_stride}")
+    if args.video and args.video_backend != "matplotlib":
+        from robot_hoi.retarget.video import choose_gl_backend
+
+        choose_gl_backend()  # must run before mujoco is imported
+
+    from dataclasses import replace
+
+    from robot_hoi.embodiment import build_model, load_embodiment
+    from robot_hoi.retarget.pipeline import RetargetOptions, retarget_clip
+    from robot_hoi.retarget.report import build_report, format_report
+
+    cfg = load_embodiment(args.embodiment)
+    clip = _load(args)
+    model = build_model(cfg)
+    options = RetargetOptions()
+    options = replace(options, mapping=replace(options.mapping, anchor_mode=args.anchor_mode))
+    result = retarget_clip(clip, cfg, model, scale=args.scale, options=options)
+    report = build_report(result)
+    report["clip"] = clip.name
+    result.motion.meta["report"] = report
+    npz, sidecar = result.motion.save(out)
+    report["output"] = {"motion": str(npz), "sidecar": str(sidecar)}
+    if args.video:
+        from robot_hoi.retarget.video import write_video
+
+        renderer = write_video(result.motion, cfg, model, args.video, clip.object, backend=args.video_backend,
+                               stride=args.video_stride, pretty=args.pretty)
+        report["video"] = {"path": str(args.video), "renderer": renderer}
+    if args.json:
+        json.dump(report, sys.stdout, indent=1)
+        sys.stdout.write("\n")
+    else:
+        print(f"clip {clip.name}")
+        print(format_report(report))
+        print(f"wrote {npz} and {sidecar}")
+        if args.video:
+            print(f"wrote {args.video} (rendered with {report['video']['renderer']})")
+    return 0
+
+
+def _load(args: argparse.Namespace):
+    if args.clip is None:
+        from robot_hoi.data.synth import default_clip
+
+        return default_clip()
+    from robot_hoi.data.clip import load_clip
+
+    kwargs = {"objects_dir": args.objects_dir} if args.objects_dir else {}
+    return load_clip(args.clip, **kwargs)

@@ -1,0 +1,140 @@
+"""Clip -> RobotMotion: targets (targets.py), finger poses (hands.py), IK (ik.py), then the report (report.py)."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import asdict, dataclass, field
+
+import mujoco
+import numpy as np
+
+from robot_hoi.retarget.hands import GraspRule, HandJoints, closure_profile, finger_angles, holding
+from robot_hoi.retarget.ik import IKResult, IKSettings, IKSolver
+from robot_hoi.retarget.kinematics import apply_joint_couplings, free_joint_id, joint_ids
+from robot_hoi.retarget.landmarks import landmarks_for
+from robot_hoi.retarget.motion import RobotMotion, finite_difference_qvel
+from robot_hoi.retarget.targets import RobotTargets, TargetMapping, hand_side, link_group, targets_from_clip
+
+
+@dataclass(frozen=True)
+class RetargetOptions:
+    mapping: TargetMapping = field(default_factory=TargetMapping)
+    ik: IKSettings = field(default_factory=IKSettings)
+    grasp: GraspRule = field(default_factory=GraspRule)
+    use_landmarks: bool = True  # IK on anatomical landmarks (landmarks.py) instead of the raw link origins
+
+
+@dataclass
+class RetargetResult:
+    motion: RobotMotion
+    targets: RobotTargets
+    ik: IKResult
+    hold: dict[str, np.ndarray]  # side -> (T,) bool, the hand holds the object
+    seconds: float  # IK wall time
+
+
+def default_qpos(model: mujoco.MjModel, cfg) -> np.ndarray:
+    """The config's default stand: pelvis at spawn_height, upright, actuated joints at their defaults."""
+    q = model.qpos0.copy()
+    free = free_joint_id(model)
+    if free is not None:
+        adr = model.jnt_qposadr[free]
+        q[adr:adr + 7] = [0.0, 0.0, cfg.spawn_height, 1.0, 0.0, 0.0, 0.0]
+    adrs = model.jnt_qposadr[joint_ids(model, cfg.actuator_names)]
+    q[adrs] = cfg.default_pos
+    apply_joint_couplings(model, q)
+    return q
+
+
+def hand_joints(cfg) -> list[HandJoints]:
+    """Per hand: its channel joints, open = the actuator default, closed = the channel's closed angle."""
+    default = dict(zip(cfg.actuator_names, cfg.default_pos, strict=True))
+    return [
+        HandJoints(
+            side=side,
+            joint_names=tuple(c.joint for c in hand.channels),
+            open_rad=tuple(float(default[c.joint]) for c in hand.channels),
+            closed_rad=tuple(float(c.closed_rad) for c in hand.channels),
+        )
+        for side, hand in cfg.hands.items()
+    ]
+
+
+def finger_presets(
+    model: mujoco.MjModel, cfg, targets: RobotTargets, base_qpos: np.ndarray, rule: GraspRule
+) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """(T, nq) qpos carrying the finger angles per frame (other entries = base_qpos), and the hold flags."""
+    preset = np.tile(base_qpos, (targets.num_frames, 1))
+    hold = {}
+    for hand in hand_joints(cfg):
+        tips = [i for i, h in enumerate(targets.human_names)
+                if link_group(h) == "fingers" and hand_side(h) == hand.side]
+        hold[hand.side] = holding(targets.anchor, tips, rule.threshold)
+        angles = finger_angles(hand, closure_profile(hold[hand.side], targets.fps, rule))
+        preset[:, model.jnt_qposadr[joint_ids(model, hand.joint_names)]] = angles
+    return preset, hold
+
+
+def retarget_targets(
+    model: mujoco.MjModel, cfg, targets: RobotTargets, options: RetargetOptions | None = None
+) -> RetargetResult:
+    """Solve the IK for prepared targets and package the motion."""
+    options = options or RetargetOptions()
+    q_default = default_qpos(model, cfg)
+    finger_joint_names = {j for hand in hand_joints(cfg) for j in hand.joint_names}
+    body_joints = [n for n in cfg.actuator_names if n not in finger_joint_names]
+    feet = [r for r, h in zip(targets.link_names, targets.human_names, strict=True) if link_group(h) == "feet"]
+    landmarks = landmarks_for(cfg.name, targets.link_names) if options.use_landmarks else {}
+    solver = IKSolver(model, targets.link_names, body_joints, q_default, feet, options.ik, landmarks)
+    preset, hold = finger_presets(model, cfg, targets, q_default, options.grasp)
+
+    start = time.perf_counter()
+    result = solver.solve(targets.pos, targets.weight, preset, targets.root_quat_wxyz)
+    seconds = time.perf_counter() - start
+
+    act_qadr = model.jnt_qposadr[model.actuator_trnid[:, 0]]
+    actuator_names = tuple(mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_ACTUATOR, a) for a in range(model.nu))
+    motion = RobotMotion(
+        fps=targets.fps,
+        qpos=result.qpos,
+        qvel=finite_difference_qvel(model, result.qpos, targets.fps),
+        joint_pos=result.qpos[:, act_qadr],
+        link_pos=result.link_pos,
+        link_quat_wxyz=result.link_quat_wxyz,
+        target_pos=targets.pos,
+        object_pos=targets.object_pos,
+        object_quat_wxyz=targets.object_quat_wxyz,
+        anchor=targets.anchor,
+        residual=result.residual,
+        link_names=targets.link_names,
+        human_names=targets.human_names,
+        actuator_names=actuator_names,
+        embodiment=cfg.name,
+        scale=targets.scale,
+        meta={
+            "mapping": asdict(options.mapping),
+            "ik": asdict(options.ik),
+            "grasp": asdict(options.grasp),
+            "landmarks": {k: [f, list(off)] for k, (f, off) in landmarks.items()},
+        },
+    )
+    return RetargetResult(motion=motion, targets=targets, ik=result, hold=hold, seconds=seconds)
+
+
+def retarget_clip(
+    clip,
+    cfg,
+    model: mujoco.MjModel | None = None,
+    scale: float | None = None,
+    options: RetargetOptions | None = None,
+) -> RetargetResult:
+    """HOIClip + embodiment config -> RetargetResult (motion, targets, IK details)."""
+    options = options or RetargetOptions()
+    if model is None:
+        from robot_hoi.embodiment import build_model
+
+        model = build_model(cfg)
+    targets = targets_from_clip(clip, cfg, scale=scale, mapping=options.mapping)
+    out = retarget_targets(model, cfg, targets, options)
+    out.motion.meta["clip"] = str(getattr(clip, "name", "") or getattr(clip, "source", ""))
+    return out
