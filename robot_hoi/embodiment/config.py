@@ -8,6 +8,7 @@ every link_map entry is a body or a site of the model.
 
 from __future__ import annotations
 
+import functools
 import math
 import os
 from collections.abc import Callable, Sequence
@@ -133,7 +134,9 @@ def _descriptions() -> dict[str, Callable[[], RobotDescription]]:
     return {"g1_inspire": g1_inspire}
 
 
+@functools.cache
 def robot_description(name: str) -> RobotDescription:
+    """The (immutable) physical description registered under `name`."""
     known = _descriptions()
     if name not in known:
         raise UserError(f"no physical robot description named {name!r} (known: {', '.join(sorted(known))})")
