@@ -1,0 +1,56 @@
+"""`robot-hoi retarget`: JSON report shape, files written, one-line user errors."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from robot_hoi.cli import main
+from robot_hoi.retarget.motion import RobotMotion
+
+
+def test_default_clip_json_report_motion_and_video(tmp_path, capsys):
+    out = tmp_path / "motion.npz"
+    video = tmp_path / "motion.mp4"
+    rc = main(["retarget", "-o", str(out), "--json", "--video", str(video), "--video-backend", "matplotlib",
+               "--video-stride", "100"])
+    assert rc == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["clip"].startswith("synth_lift_carry")
+    assert report["frames"] > 100 and report["fps"] == 30.0 and 0.6 < report["scale"] < 0.9
+    assert set(report["position_error"]) == {"pelvis", "legs", "feet", "torso", "head", "arms", "wrists", "fingers"}
+    for entry in report["position_error"].values():
+        assert set(entry) == {"mean_cm", "max_cm"} and 0.0 <= entry["mean_cm"] <= entry["max_cm"]
+    assert set(report["feet"]) == {"max_penetration_cm", "frames_penetrating_over_5mm"}
+    assert report["feet"]["max_penetration_cm"] == 0.0
+    assert set(report["joint_limits"]) == {"frame_joint_hits", "joints"}
+    for side in ("left", "right"):
+        hand = report["anchor"][side]
+        assert 0.0 < hand["frames_anchored_frac"] <= 1.0
+        assert hand["robot_surface_dist_cm_mean"] >= 0.0 and hand["human_surface_dist_cm_mean"] >= 0.0
+    assert report["video"] == {"path": str(video), "renderer": "matplotlib"}
+    assert video.stat().st_size > 1000
+
+    motion = RobotMotion.load(out)
+    assert motion.num_frames == report["frames"] and motion.embodiment == "g1_inspire"
+    assert motion.meta["report"]["position_error"] == report["position_error"]
+    assert np.isfinite(motion.qpos).all()
+
+
+def test_bad_output_name_is_a_one_line_error(tmp_path, capsys):
+    assert main(["retarget", "-o", str(tmp_path / "motion.pkl")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "must end in .npz" in err
+
+
+def test_missing_clip_is_a_one_line_error(tmp_path, capsys):
+    assert main(["retarget", str(tmp_path / "nope.pt"), "-o", str(tmp_path / "m.npz")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "nope.pt" in err and "Traceback" not in err
+
+
+@pytest.mark.parametrize("flag", [["--video-stride", "0", "--video", "x.mp4"], ["--video", "x.avi"]])
+def test_bad_video_flags(tmp_path, capsys, flag):
+    assert main(["retarget", "-o", str(tmp_path / "m.npz"), *flag]) == 2
