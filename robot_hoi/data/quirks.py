@@ -4,7 +4,8 @@
 * Quaternion sign flips (q vs -q): every quaternion stream is made continuous (hemisphere of the previous frame).
 * `sub8` finger rows (InterAct's older OMOMO export): body_pos finger rows are shifted by 3 SMPL-X joints; the
   22 body joints, body_quat and dof_rotvec are right. Detected from bone-length statistics (a finger's offset
-  in its parent's frame must be constant; shifted rows are not), not from the subject name. Fix: move the rows
+  in its parent's frame must be constant; shifted rows are not, while the body joints' are), not from the
+  subject name. Fix: move the rows
   back (exact, verified by constant offsets afterwards) and rebuild the lost right thumb from body_quat and the
   left thumb's bone offsets mirrored (the skeleton is left/right symmetric to ~4 mm). If the known shift does not
   explain the data, every finger row is rebuilt from the template hand scaled to the subject's forearm and the
@@ -20,6 +21,7 @@ from robot_hoi.data.clip import HOIClip
 from robot_hoi.data.kinematics import bone_offsets, make_quaternions_continuous
 from robot_hoi.data.layout import (
     BODY_INDEX,
+    BODY_JOINTS,
     BODY_PARENTS,
     FINGERS,
     KINEMATIC_COLUMN_SLICES,
@@ -67,7 +69,9 @@ def finger_offset_spread(body_pos: np.ndarray, body_quat_xyzw: np.ndarray, rows=
 
 def fix_shifted_finger_rows(body_pos: np.ndarray, body_quat_xyzw: np.ndarray) -> tuple[np.ndarray, list[str]]:
     """Detect and repair shifted finger rows. Returns (body_pos, notes); body_pos unchanged when consistent."""
-    if finger_offset_spread(body_pos, body_quat_xyzw) <= FINGER_OFFSET_STD_LIMIT_M:
+    # Noisy capture moves every joint alike; shifted rows make the fingers far worse than the body joints.
+    body_spread = finger_offset_spread(body_pos, body_quat_xyzw, [j for j in BODY_JOINTS if j])
+    if finger_offset_spread(body_pos, body_quat_xyzw) <= max(FINGER_OFFSET_STD_LIMIT_M, 3.0 * body_spread):
         return body_pos, []
     fixed = np.array(body_pos, copy=True)
     for correct_rows, buggy_rows in SHIFTED_FINGER_ROW_FIX:
