@@ -8,10 +8,6 @@ import pytest
 
 from robot_hoi.embodiment import build_model, load_embodiment
 
-# Unitree's deploy ankle gains (kp 40 per ankle) give 80 N·m/rad about the ankles, below the robot's toppling
-# stiffness m·g·h ≈ 33.4 kg · 9.81 · 0.69 m ≈ 225 N·m/rad: on the real robot the policy balances. To check the
-# model (contacts, masses, PD) on its own we hold the default pose with stiffer ankles.
-STAND_ANKLE_KP, STAND_ANKLE_KD = 250.0, 5.0
 
 
 @pytest.fixture(scope="module")
@@ -80,12 +76,7 @@ def test_fingers_close_fully_in_well_under_a_second_without_overshoot(cfg, hand_
 
 
 def test_stands_on_the_floor_for_five_seconds(cfg):
-    model = build_model(cfg)
-    for name in ("left_ankle_pitch_joint", "right_ankle_pitch_joint", "left_ankle_roll_joint",
-                 "right_ankle_roll_joint"):
-        i = model.actuator(name).id
-        model.actuator_gainprm[i, 0] = STAND_ANKLE_KP
-        model.actuator_biasprm[i, 1:3] = (-STAND_ANKLE_KP, -STAND_ANKLE_KD)
+    model = build_model(cfg)  # the config's own gains (ankle kp 300: see configs/embodiments/g1_inspire.yaml)
     data = mujoco.MjData(model)
     mujoco.mj_resetDataKeyframe(model, data, 0)
     heights, uprights = [], []
