@@ -45,6 +45,7 @@ def standing_reference(scene: InteractionScene, frames: int = FRAMES) -> Referen
 
 def make_env(scene, **overrides) -> InteractionEnv:
     cfg = InteractionEnvCfg(num_envs=8, nthread=2, seed=3)
+    cfg.init.joint_noise = 0.0
     for key, value in overrides.items():
         setattr(cfg, key, value)
     return InteractionEnv(cfg, scene, [standing_reference(scene)])
@@ -64,7 +65,7 @@ def test_step_shapes_rewards_and_logs(scene):
     # a standing robot tracking a standing reference is rewarded highly on position
     assert env.w_d.sum(-1).allclose(torch.ones(8), atol=1e-5)
     pos_reward = torch.exp(-30.0 * env.reward_funcs["link_pos"][0](env))
-    assert pos_reward.mean() > 0.3
+    assert pos_reward.mean() > 0.5
 
 
 def test_warmup_holds_the_reference_clock(scene):

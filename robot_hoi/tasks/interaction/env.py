@@ -31,6 +31,9 @@ class ReferenceFrame:
     object_quat_wxyz: Tensor
     hand_contact: Tensor
     hand_distance: Tensor
+    root_pos: Tensor
+    root_quat_wxyz: Tensor
+    joint_pos: Tensor
 
 
 class InteractionEnv:
@@ -52,6 +55,11 @@ class InteractionEnv:
         self.action_scale = torch.tensor(emb.action_scale, dtype=torch.float32)
         lo, hi = scene.actuator_ctrlrange()
         self.ctrl_low, self.ctrl_high = torch.tensor(lo, dtype=torch.float32), torch.tensor(hi, dtype=torch.float32)
+        hand_joints = {c.joint for hand in emb.hands.values() for c in hand.channels}
+        self.body_actuator_ids = [i for i, n in enumerate(layout.actuator_names) if n not in hand_joints]
+        contact_index = {n: i for i, n in enumerate(layout.contact_names)}
+        self.hand_force_sensor_ids = [contact_index[f"{prefix}{finger}"] for prefix in ("L_", "R_")
+                                      for finger in obs_terms.FINGER_CHANNEL_SENSORS]
         self._setup_references(references)
         self.reward_weights = {n: t.weight for n, t in cfg.rewards.items() if t is not None}
         self.reward_funcs = {n: (reward_terms.REWARD_TERMS[t.func], t.params)
@@ -77,6 +85,7 @@ class InteractionEnv:
         self.ref_object_pos, self.ref_object_quat = cat("object_pos"), cat("object_quat_wxyz")
         self.ref_object_lin_vel, self.ref_object_ang_vel = cat("object_lin_vel"), cat("object_ang_vel")
         self.ref_robot_qpos, self.ref_robot_qvel = cat("robot_qpos"), cat("robot_qvel")
+        self.ref_joint_pos = cat("joint_pos")
         lengths = torch.tensor([r.num_frames for r in references])
         self.clip_start = torch.cumsum(lengths, 0) - lengths
         self.clip_end = self.clip_start + lengths - 1
@@ -185,6 +194,8 @@ class InteractionEnv:
             link_pos=self.ref_link_pos[idx], link_quat_wxyz=self.ref_link_quat[idx], d_hat=self.ref_d_hat[idx],
             object_pos=self.ref_object_pos[idx], object_quat_wxyz=self.ref_object_quat[idx],
             hand_contact=self.ref_hand_contact[idx], hand_distance=self.ref_hand_distance[idx],
+            root_pos=self.ref_robot_qpos[idx, 0:3], root_quat_wxyz=self.ref_robot_qpos[idx, 3:7],
+            joint_pos=self.ref_joint_pos[idx],
         )
 
     def _terminations(self) -> dict[str, Tensor]:
@@ -310,7 +321,10 @@ class InteractionEnv:
     # ---- observations -------------------------------------------------------------------------------------------
     def _observations(self) -> dict[str, Tensor]:
         policy = obs_terms.teacher_observation(self)
-        return {"policy": policy, "critic": torch.cat([policy, obs_terms.critic_extras(self)], dim=-1)}
+        groups = {"policy": policy, "critic": torch.cat([policy, obs_terms.critic_extras(self)], dim=-1)}
+        if self.cfg.student_obs_terms:
+            groups["student"] = obs_terms.student_observation(self)
+        return groups
 
 
 def _subsample(points: Tensor, count: int) -> Tensor:

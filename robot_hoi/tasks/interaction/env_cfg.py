@@ -72,6 +72,9 @@ class InteractionEnvCfg:
     nthread: int | None = None
     seed: int = 0
     keyframes: tuple[int, ...] = (1, 16)    # teacher keyframes K (Sec. 4)
+    student_keyframes: tuple[int, ...] = (1, 2, 4, 16)  # student keyframes K (Sec. 4)
+    # The deployable observation (deploy/observations.py terms, in this order); empty = no "student" group.
+    student_obs_terms: tuple[str, ...] = ()
     warmup_frames: int = 15                 # stand-and-approach frames (supp. F)
     max_episode_frames: int = 300           # supp. Table C
     reference_links: str = "ik"             # "ik" (robot-reachable link targets) | "scaled_human" (pure InterMimic)

@@ -147,3 +147,88 @@ def teacher_observation_spec(env) -> list[dict]:
     spec += [{"name": f"teacher.reference_goal_k{k}", "size": int(reference_goal(env, k).shape[1])}
              for k in env.cfg.keyframes]
     return spec
+
+
+# ---- deployable (student) observation: the exact math of deploy/observations.py, batched in torch ---------------
+# Only what the robot measures (joints, pelvis IMU, Inspire angles and forces, tracked object and pelvis poses)
+# plus the reference. deploy/observations.py documents each formula; tests/tasks compares both builders.
+FINGER_CHANNEL_SENSORS = ("pinky", "ring", "middle", "index", "thumb", "thumb")  # Inspire register order
+
+
+def projected_gravity(env) -> Tensor:
+    gravity = torch.tensor([0.0, 0.0, -1.0]).expand(env.num_envs, 3)
+    return quat_apply_inverse(env.root_quat, gravity)
+
+
+def base_ang_vel(env) -> Tensor:
+    return env.root_ang_vel
+
+
+def joint_pos(env) -> Tensor:
+    return env.joint_pos - env.default_joint_pos
+
+
+def joint_vel(env) -> Tensor:
+    return env.joint_vel[:, env.body_actuator_ids]
+
+
+def hand_force(env) -> Tensor:
+    """Fingertip force per Inspire channel in tenths of newtons (FORCE_ACT grams * 9.81e-3 / 10 on hardware)."""
+    return env.contact_force[:, env.hand_force_sensor_ids].norm(dim=-1) / 10.0
+
+
+def last_action_term(env) -> Tensor:
+    return env.last_actions
+
+
+def object_pos(env) -> Tensor:
+    return _to_heading(env, env.object_pos - env.root_pos)
+
+
+def object_rot(env) -> Tensor:
+    return _rot_in_heading(env, env.object_quat)
+
+
+def _keyframe_stack(env, fn) -> Tensor:
+    return torch.cat([fn(env.reference_at(k)) for k in env.cfg.student_keyframes], dim=-1)
+
+
+def ref_root_pos(env) -> Tensor:
+    return _keyframe_stack(env, lambda ref: _to_heading(env, ref.root_pos - env.root_pos))
+
+
+def ref_root_rot(env) -> Tensor:
+    return _keyframe_stack(env, lambda ref: _rot_in_heading(env, ref.root_quat_wxyz))
+
+
+def ref_joint_pos(env) -> Tensor:
+    return _keyframe_stack(env, lambda ref: ref.joint_pos - env.default_joint_pos)
+
+
+def ref_link_pos(env) -> Tensor:
+    return _keyframe_stack(env, lambda ref: _flat(_to_heading(env, ref.link_pos - env.root_pos[:, None])))
+
+
+def ref_object_pos(env) -> Tensor:
+    return _keyframe_stack(env, lambda ref: _to_heading(env, ref.object_pos - env.root_pos))
+
+
+def ref_object_rot(env) -> Tensor:
+    return _keyframe_stack(env, lambda ref: _rot_in_heading(env, ref.object_quat_wxyz))
+
+
+STUDENT_TERMS = {
+    "projected_gravity": projected_gravity, "base_ang_vel": base_ang_vel, "joint_pos": joint_pos,
+    "joint_vel": joint_vel, "hand_force": hand_force, "last_action": last_action_term, "object_pos": object_pos,
+    "object_rot": object_rot, "ref_root_pos": ref_root_pos, "ref_root_rot": ref_root_rot,
+    "ref_joint_pos": ref_joint_pos, "ref_link_pos": ref_link_pos, "ref_object_pos": ref_object_pos,
+    "ref_object_rot": ref_object_rot,
+}
+
+
+def student_observation(env) -> Tensor:
+    return torch.cat([STUDENT_TERMS[name](env) for name in env.cfg.student_obs_terms], dim=-1)
+
+
+def student_observation_spec(env) -> list[dict]:
+    return [{"name": name, "size": int(STUDENT_TERMS[name](env).shape[1])} for name in env.cfg.student_obs_terms]
