@@ -13,6 +13,8 @@ joint held (one active-set pass), then every limited joint is clamped. Feet: lin
 to at least their flat-foot height, sole points (the foot collision geoms' lowest corners) that sink below the
 floor become extra, heavily weighted rows pushing them back up, a foot near the floor is pulled toward zero roll,
 and after the last iteration the base is raised by whatever penetration is left, so no sole point ends below it.
+Object: given the object's hull and pose per frame, hand probe points (sphere-swept hand collision geometry,
+object_contact.py) that sink into the hull become rows pushing them out along the nearest face normal.
 """
 
 from __future__ import annotations
@@ -32,6 +34,7 @@ from robot_hoi.retarget.kinematics import (
     point_jacobians,
     resolve_links,
 )
+from robot_hoi.retarget.object_contact import HullPlanes, ProbePoints
 
 _DOFS_PER_JOINT = {
     mujoco.mjtJoint.mjJNT_FREE: 6,
@@ -52,6 +55,8 @@ class IKSettings:
     max_step: float = 0.3  # largest change of any coordinate in one iteration (rad or m)
     floor_height: float = 0.0
     floor_weight: float = 50.0
+    object_weight: float = 20.0  # pushes hand probe points out of the object's hull
+    object_margin: float = 0.01  # m: probes this close to the hull already resist moving in (no chatter)
     foot_roll_weight: float = 0.05  # keeps a foot near the floor from rolling onto its edge
     foot_roll_height: float = 0.08  # m: the roll term fades out as the sole rises to this height
     step_tolerance: float = 1e-6  # stop a frame's iterations once max |dq| falls below this
@@ -65,6 +70,7 @@ class IKResult:
     point_pos: np.ndarray  # (T, L, 3) achieved IK points (the landmarks; = link_pos where none is set)
     residual: np.ndarray  # (T, L) |IK point - target| in metres (target after the foot clamp)
     sole_min_z: np.ndarray  # (T,) lowest sole point; below floor_height means the feet penetrate
+    object_penetration: np.ndarray  # (T,) deepest hand probe inside the object's hull (0 when none, or no object)
     at_limit: np.ndarray  # (T, J_limited) bool, joint sitting on a limit (within 1e-4 rad)
     limited_joint_names: tuple[str, ...]
     iterations: np.ndarray  # (T,) Gauss-Newton iterations used
@@ -82,6 +88,7 @@ class IKSolver:
         foot_link_names: list[str] | tuple[str, ...] = (),
         settings: IKSettings | None = None,
         landmarks: dict[str, tuple[str, tuple[float, float, float]]] | None = None,
+        probes: ProbePoints | None = None,
     ):
         """`landmarks` {link: (frame, offset)}: the point the IK moves for that link, when it is not the link
         itself (see landmarks.py). Residuals are measured at these points; link poses at the links."""
@@ -147,6 +154,8 @@ class IKSolver:
         self.foot_bodies = np.unique(self.sole_body)
         self.link_min_z = self._flat_foot_heights(foot_link_names)
         self._jac = np.zeros((len(self.points), 3, model.nv))
+        self.probes = probes
+        self._object: tuple[HullPlanes, np.ndarray, np.ndarray] | None = None  # this frame's hull, pos, rotation
 
     # -- setup helpers -------------------------------------------------------------------------------------------
 
@@ -220,6 +229,7 @@ class IKSolver:
             g = A.T @ (b * row_w)
             self._add_floor_rows(H, g)
             self._add_foot_roll_rows(H, g)
+            self._add_object_rows(H, g)
             if root_quat_wxyz is not None and s.root_rot_weight > 0 and self.root_body >= 0:
                 self._add_root_rows(H, g, root_quat_wxyz)
             H[np.diag_indices(n)] += s.damping
@@ -286,6 +296,28 @@ class IKSolver:
         if depth > 0:
             q[self.model.jnt_qposadr[self.free_joint] + 2] += depth
 
+    def _probe_depths(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Hand probes vs this frame's object: (world points, depth = radius - hull distance, face normals)."""
+        hull, pos, rot = self._object
+        d, pr = self.data, self.probes
+        world = d.xpos[pr.body_ids] + np.einsum("nij,nj->ni", d.xmat[pr.body_ids].reshape(-1, 3, 3), pr.local)
+        dist, face = hull.signed_distance((world - pos) @ rot)
+        return world, pr.radius - dist, hull.normals[face] @ rot.T
+
+    def _add_object_rows(self, H: np.ndarray, g: np.ndarray) -> None:
+        if self._object is None or self.probes is None or not len(self.probes):
+            return
+        world, depth, normals = self._probe_depths()
+        near = np.flatnonzero(depth > -self.settings.object_margin)
+        if not len(near):
+            return
+        jac = np.zeros((len(near), 3, self.model.nv))
+        point_jacobians(self.model, self.data, self.probes.body_ids[near], world[near], jac)
+        Jn = np.einsum("ni,nij->nj", normals[near], jac[:, :, self.dofs])
+        w = self.settings.object_weight
+        H += w * Jn.T @ Jn
+        g += w * Jn.T @ np.maximum(depth[near], 0.0)
+
     def _add_root_rows(self, H: np.ndarray, g: np.ndarray, quat_wxyz: np.ndarray) -> None:
         d = self.data
         err_local = np.zeros(3)
@@ -323,11 +355,13 @@ class IKSolver:
         preset_qpos: np.ndarray | None = None,
         root_quat_wxyz: np.ndarray | None = None,
         qpos_init: np.ndarray | None = None,
+        object_track: tuple[HullPlanes, np.ndarray, np.ndarray] | None = None,
     ) -> IKResult:
         """Solve a whole clip frame by frame. targets (T, L, 3), weights (T, L).
 
         preset_qpos (T, nq): values for the qpos entries the IK does not move (fingers); coupled joints follow.
         root_quat_wxyz (T, 4): optional weak orientation target for the floating base.
+        object_track (hull, pos (T, 3), quat_wxyz (T, 4)): keeps the hand probes out of the object's hull.
         """
         T = targets.shape[0]
         if targets.shape != (T, len(self.points), 3) or weights.shape != (T, len(self.points)):
@@ -343,17 +377,29 @@ class IKSolver:
                 q[self._preset_qadr] = preset_qpos[t, self._preset_qadr]
             apply_joint_couplings(self.model, q)
             n_it = s.first_frame_iterations if t == 0 else s.iterations
+            self._object = None if object_track is None else self._object_at(object_track, t)
             q, iters[t] = self.solve_frame(q, targets[t], weights[t], n_it, None if rq is None else rq[t])
             qpos[t] = q
-        return self.evaluate(qpos, targets, iters)
+        self._object = None
+        return self.evaluate(qpos, targets, iters, object_track)
 
-    def evaluate(self, qpos: np.ndarray, targets: np.ndarray, iterations: np.ndarray | None = None) -> IKResult:
+    @staticmethod
+    def _object_at(track, t: int) -> tuple[HullPlanes, np.ndarray, np.ndarray]:
+        hull, pos, quat_wxyz = track
+        rot = np.zeros(9)
+        mujoco.mju_quat2Mat(rot, np.asarray(quat_wxyz[t], dtype=np.float64))
+        return hull, np.asarray(pos[t], dtype=np.float64), rot.reshape(3, 3)
+
+    def evaluate(
+        self, qpos: np.ndarray, targets: np.ndarray, iterations: np.ndarray | None = None, object_track=None
+    ) -> IKResult:
         """Link positions, residuals, floor clearance and limit contacts of given poses."""
         T = qpos.shape[0]
         link_pos = np.zeros((T, len(self.links), 3))
         link_quat = np.zeros((T, len(self.links), 4))
         point_pos = np.zeros((T, len(self.points), 3))
         sole_min = np.full(T, np.inf)
+        penetration = np.zeros(T)
         for t in range(T):
             self.data.qpos[:] = qpos[t]
             mujoco.mj_kinematics(self.model, self.data)
@@ -362,6 +408,10 @@ class IKSolver:
             point_pos[t] = link_positions(self.data, self.points)
             if len(self.sole_body):
                 sole_min[t] = self._sole_world()[:, 2].min()
+            if object_track is not None and self.probes is not None and len(self.probes):
+                self._object = self._object_at(object_track, t)
+                penetration[t] = max(float(self._probe_depths()[1].max()), 0.0)
+        self._object = None
         clamped = targets.copy()
         clamped[..., 2] = np.maximum(clamped[..., 2], self.link_min_z)
         q_lim = qpos[:, self._lim_qadr]
@@ -373,6 +423,7 @@ class IKSolver:
             point_pos=point_pos,
             residual=np.linalg.norm(point_pos - clamped, axis=-1),
             sole_min_z=sole_min,
+            object_penetration=penetration,
             at_limit=at_limit,
             limited_joint_names=self.limited_joint_names,
             iterations=np.zeros(T, dtype=np.int64) if iterations is None else iterations,

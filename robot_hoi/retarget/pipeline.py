@@ -10,9 +10,10 @@ import numpy as np
 
 from robot_hoi.retarget.hands import GraspRule, HandJoints, closure_profile, finger_angles, holding
 from robot_hoi.retarget.ik import IKResult, IKSettings, IKSolver
-from robot_hoi.retarget.kinematics import apply_joint_couplings, free_joint_id, joint_ids
+from robot_hoi.retarget.kinematics import apply_joint_couplings, free_joint_id, joint_ids, resolve_links
 from robot_hoi.retarget.landmarks import landmarks_for
 from robot_hoi.retarget.motion import RobotMotion, finite_difference_qvel
+from robot_hoi.retarget.object_contact import hand_probe_points
 from robot_hoi.retarget.targets import RobotTargets, TargetMapping, hand_side, link_group, targets_from_clip
 
 
@@ -85,11 +86,16 @@ def retarget_targets(
     body_joints = [n for n in cfg.actuator_names if n not in finger_joint_names]
     feet = [r for r, h in zip(targets.link_names, targets.human_names, strict=True) if link_group(h) == "feet"]
     landmarks = landmarks_for(cfg.name, targets.link_names) if options.use_landmarks else {}
-    solver = IKSolver(model, targets.link_names, body_joints, q_default, feet, options.ik, landmarks)
+    wrists = [r for r, h in zip(targets.link_names, targets.human_names, strict=True) if link_group(h) == "wrists"]
+    probes = hand_probe_points(model, resolve_links(model, wrists).body_ids) if wrists else None
+    solver = IKSolver(model, targets.link_names, body_joints, q_default, feet, options.ik, landmarks, probes)
     preset, hold = finger_presets(model, cfg, targets, q_default, options.grasp)
 
     start = time.perf_counter()
-    result = solver.solve(targets.pos, targets.weight, preset, targets.root_quat_wxyz)
+    track = None
+    if targets.object_hull is not None:
+        track = (targets.object_hull, targets.object_pos, targets.object_quat_wxyz)
+    result = solver.solve(targets.pos, targets.weight, preset, targets.root_quat_wxyz, object_track=track)
     seconds = time.perf_counter() - start
 
     act_qadr = model.jnt_qposadr[model.actuator_trnid[:, 0]]

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from robot_hoi.retarget.targets import GROUPS, hand_side, link_group
+from robot_hoi.retarget.targets import GROUPS, hand_side, link_group, to_object_frame, wxyz_to_xyzw
 
 
 def _cm(x) -> float:
@@ -73,6 +73,25 @@ def build_report(result, floor_height: float = 0.0) -> dict:
             "joints": {n: int(c) for n, c in zip(ik.limited_joint_names, hits_per_joint, strict=True) if c},
         },
         "anchor": {"object_lifted_frac": round(float(lifted.mean()), 3), **anchor},
+        "hands_in_object": _hands_in_object(result),
+    }
+
+
+def _hands_in_object(result) -> dict:
+    """How deep the robot's hand geometry and the human's hand joints sit inside the object's convex hull."""
+    targets, ik = result.targets, result.ik
+    if targets.object_hull is None:
+        return {}
+    names = targets.human_names
+    cols = [i for i, h in enumerate(names) if hand_side(h) is not None]
+    local = to_object_frame(targets.human_pos[:, cols], targets.human_object_pos,
+                            wxyz_to_xyzw(targets.object_quat_wxyz))
+    human_depth = np.maximum(-targets.object_hull.signed_distance(local)[0].min(axis=1), 0.0)
+    return {
+        "robot_max_cm": _cm(ik.object_penetration.max()),
+        "robot_frames_over_1cm": int((ik.object_penetration > 0.01).sum()),
+        "human_max_cm": _cm(human_depth.max()),
+        "human_frames_over_1cm": int((human_depth > 0.01).sum()),
     }
 
 
@@ -89,6 +108,11 @@ def format_report(report: dict) -> str:
     lim = report["joint_limits"]
     joints = ", ".join(f"{k} ({v})" for k, v in lim["joints"].items()) or "none"
     lines.append(f"joint limits: {lim['frame_joint_hits']} frame-joint contacts; {joints}")
+    inside = report.get("hands_in_object")
+    if inside:
+        lines.append(f"hands inside the object's hull: robot max {inside['robot_max_cm']} cm "
+                     f"({inside['robot_frames_over_1cm']} frames > 1 cm); human hand joints max "
+                     f"{inside['human_max_cm']} cm ({inside['human_frames_over_1cm']} frames > 1 cm)")
     anchor = report["anchor"]
     lines.append(f"object lifted in {anchor['object_lifted_frac'] * 100:.0f}% of frames")
     for side in ("left", "right"):

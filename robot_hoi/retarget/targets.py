@@ -15,7 +15,9 @@ The mapping (the team's design; every number below is a `TargetMapping` field):
   0 where it says far, the distance weight otherwise. The anchored point is the human link expressed in the
   human-space object frame and mapped back through the robot-space object pose:
       p_anchor = R_obj' R_obj^T (p - o) + o'
-  and the target is  a p_anchor + (1 - a) p'.
+  and the target is  a p_anchor + (1 - a) p'. Mocap hands sink into objects (fingertip joints 2-5 cm deep in
+  OMOMO) and the simulation collides with the object's convex hull, so an anchored point inside the hull (or
+  closer than object_clearance to it) is first moved out along the nearest hull face (object_contact.py).
 * Weights. Each link's IK weight is its group's weight plus anchor_weight * a: a hand on the object matters more
   than a hand in the air. Free fingertips weigh little (the Inspire hand is longer than a scaled human hand, so
   free fingertips would only pull the wrist off its target); anchored ones weigh like a wrist on the object.
@@ -33,6 +35,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from robot_hoi.errors import DataError
+from robot_hoi.retarget.object_contact import HullPlanes
 
 # Human body name -> link group (used for weights and for the residual report).
 _GROUP_OF_NAME = {
@@ -72,6 +75,7 @@ class TargetMapping:
     anchor_mode: str = "distance"  # "distance" | "contact" (use the clip's per-body labels where they exist)
     anchor_weight: float = 2.0  # added to a link's weight in proportion to its anchor weight a
     scale_object_height: bool = True  # False keeps the object's real height (then z_rest plays no role)
+    object_clearance: float | None = 0.01  # m: anchored points inside the object's hull go out to this; None: off
     group_weights: dict[str, float] = field(
         default_factory=lambda: {
             "pelvis": 3.0, "legs": 1.0, "feet": 2.0, "torso": 1.0, "head": 0.3,
@@ -105,8 +109,10 @@ class RobotTargets:
     scale: float
     human_pos: np.ndarray  # (T, L, 3) the human links, real scale (for reports)
     human_surface_dist: np.ndarray  # (T, L) human link to object surface, m
+    human_object_pos: np.ndarray  # (T, 3) the object's real (human-space) position; orientation as object_quat
     object_points_local: np.ndarray  # (P, 3) object surface samples in the object frame
     object_local_distance: Callable[[np.ndarray], np.ndarray] | None = None  # dense surface distance, if known
+    object_hull: HullPlanes | None = None  # the object's convex hull (what the simulation collides with)
 
     def robot_surface_distance(self, points: np.ndarray) -> np.ndarray:
         """Distance (T, L) of robot-space points (T, L, 3) to the robot-space object surface."""
@@ -188,12 +194,14 @@ def map_positions(
     mapping: TargetMapping,
     contact_labels: np.ndarray | None = None,
     local_distance: Callable[[np.ndarray], np.ndarray] | None = None,
+    hull: HullPlanes | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The core of the mapping on plain arrays.
 
     human_pos (T, L, 3) real-scale link positions; root_xy (T, 2); object pose (T, 3) + (T, 4 xyzw); points_local
-    (P, 3); contact_labels (T, L) or None; local_distance: see `surface_distance`. Returns (targets (T, L, 3),
-    anchor (T, L), robot object pos (T, 3), human surface distance (T, L)).
+    (P, 3); contact_labels (T, L) or None; local_distance: see `surface_distance`; hull: the object's convex hull
+    for mapping.object_clearance. Returns (targets (T, L, 3), anchor (T, L), robot object pos (T, 3), human
+    surface distance (T, L)).
     """
     scaled = scale_body(human_pos, root_xy, s)
     obj_robot = scale_object(object_pos, s, mapping.scale_object_height)
@@ -201,6 +209,8 @@ def map_positions(
     a = anchor_weights(dist, mapping.anchor_radius, contact_labels if mapping.anchor_mode == "contact" else None)
     rot_r = Rotation.from_quat(object_quat_xyzw).as_matrix()  # the object keeps its orientation
     local = to_object_frame(human_pos, object_pos, object_quat_xyzw)
+    if hull is not None and mapping.object_clearance is not None:
+        local = hull.push_out(local, mapping.object_clearance)
     anchored = np.einsum("tij,tlj->tli", rot_r, local) + obj_robot[:, None, :]
     targets = a[..., None] * anchored + (1.0 - a[..., None]) * scaled
     return targets, a, obj_robot, dist
@@ -243,12 +253,15 @@ def targets_from_clip(clip, cfg, scale: float | None = None, mapping: TargetMapp
     obj_quat_xyzw = np.asarray(clip.object_quat_xyzw, dtype=np.float64)
     points_local = np.asarray(clip.object.sample_points, dtype=np.float64)
     local_distance = getattr(clip.object, "surface_distance", None)
+    vertices = getattr(clip.object, "vertices", None)
+    hull = HullPlanes.from_vertices(vertices) if vertices is not None and len(vertices) >= 4 else None
     labels = getattr(clip, "body_contact", None)
     labels = None if labels is None else np.asarray(labels)[:, human_idx]
     human_pos = body_pos[:, human_idx]
 
     pos, a, obj_robot, dist = map_positions(
-        human_pos, body_pos[:, 0, :2], obj_pos, obj_quat_xyzw, points_local, scale, mapping, labels, local_distance)
+        human_pos, body_pos[:, 0, :2], obj_pos, obj_quat_xyzw, points_local, scale, mapping, labels, local_distance,
+        hull)
     groups = [link_group(h) for h in link_map.values()]
     base_w = np.array([mapping.group_weights[g] for g in groups])
     weight = base_w[None, :] + mapping.anchor_weight * a
@@ -265,6 +278,8 @@ def targets_from_clip(clip, cfg, scale: float | None = None, mapping: TargetMapp
         scale=float(scale),
         human_pos=human_pos,
         human_surface_dist=dist,
+        human_object_pos=obj_pos,
         object_points_local=points_local,
         object_local_distance=local_distance,
+        object_hull=hull,
     )

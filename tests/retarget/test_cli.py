@@ -30,6 +30,8 @@ def test_default_clip_json_report_motion_and_video(tmp_path, capsys):
         hand = report["anchor"][side]
         assert 0.0 < hand["frames_anchored_frac"] <= 1.0
         assert hand["robot_surface_dist_cm_mean"] >= 0.0 and hand["human_surface_dist_cm_mean"] >= 0.0
+    assert set(report["hands_in_object"]) == {"robot_max_cm", "robot_frames_over_1cm", "human_max_cm",
+                                              "human_frames_over_1cm"}
     assert report["video"] == {"path": str(video), "renderer": "matplotlib"}
     assert video.stat().st_size > 1000
 

@@ -71,6 +71,9 @@ def test_hands_stay_on_the_carried_object(synthetic):
         hand = hand_surface_distance(dist, motion.human_names, side)[lifted]
         assert hand.max() < 0.03, f"{side} hand {hand.max():.3f} m from the box while it is carried"
         assert synthetic.hold[side][lifted].all(), f"{side} hand not holding while the box is carried"
+    # ... and on it, not in it: the hand's collision geometry stays (nearly) out of the box's hull
+    assert synthetic.ik.object_penetration.max() < 0.025
+    assert np.mean(synthetic.ik.object_penetration > 0.01) < 0.05
 
 
 def test_fingers_close_only_while_holding(synthetic, g1):

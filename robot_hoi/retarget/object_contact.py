@@ -1,0 +1,99 @@
+"""Keeping hands out of the object: its convex hull (what the simulation collides with) and hand probe points.
+
+The simulation collides with the object's convex hull (robot_hoi.sim.scene), and the mocap hands often sink into
+the object (OMOMO fingertip joints sit 2-5 cm inside the box), so a reference state copied from them would start
+an episode with the fingers inside the hull. Two fixes use the hull's planes (n . x + d <= 0 inside, n outward):
+anchored targets are pushed out to a clearance (targets.py) and the IK pushes hand probe points out (ik.py).
+For a point inside a convex hull, max_k(n_k . x + d_k) is its exact signed distance; outside it is a lower bound.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import ConvexHull
+
+
+@dataclass(frozen=True)
+class HullPlanes:
+    """Outward unit normals (K, 3) and offsets (K,) of a convex hull, in the object frame."""
+
+    normals: np.ndarray
+    offsets: np.ndarray
+
+    @classmethod
+    def from_vertices(cls, vertices: np.ndarray) -> HullPlanes:
+        eq = ConvexHull(np.asarray(vertices, dtype=np.float64)).equations
+        return cls(normals=eq[:, :3].copy(), offsets=eq[:, 3].copy())
+
+    def signed_distance(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(..., 3) object-frame points -> (signed distance (...), index of the closest face plane (...))."""
+        values = points @ self.normals.T + self.offsets
+        face = values.argmax(axis=-1)
+        return np.take_along_axis(values, face[..., None], axis=-1)[..., 0], face
+
+    def push_out(self, points: np.ndarray, clearance: float) -> np.ndarray:
+        """Points closer than `clearance` to the hull (or inside it) moved out along the nearest face normal."""
+        dist, face = self.signed_distance(points)
+        gap = np.maximum(clearance - dist, 0.0)
+        return points + gap[..., None] * self.normals[face]
+
+
+@dataclass(frozen=True)
+class ProbePoints:
+    """Points on robot bodies that must stay `radius` away from the object (sphere-swept hand geometry)."""
+
+    body_ids: np.ndarray  # (N,)
+    local: np.ndarray  # (N, 3) in the body frame
+    radius: np.ndarray  # (N,)
+
+    def __len__(self) -> int:
+        return len(self.body_ids)
+
+
+def _subtree(model, root: int) -> list[int]:
+    out = []
+    for b in range(model.nbody):
+        a = b
+        while a > 0 and a != root:
+            a = int(model.body_parentid[a])
+        if a == root:
+            out.append(b)
+    return out
+
+
+def hand_probe_points(model, root_bodies) -> ProbePoints:
+    """Probe points of the collision geoms in the subtrees of `root_bodies` (e.g. the wrist-yaw links).
+
+    Capsules give their two end centres and radius, spheres their centre, boxes their 8 corners (radius 0) and
+    centre (radius = smallest half size). Geom frames are fixed in their body, so the points are too.
+    """
+    import mujoco
+
+    bodies, local, radius = [], [], []
+    for root in root_bodies:
+        for body in _subtree(model, int(root)):
+            for g in np.flatnonzero(model.geom_bodyid == body):
+                if not (model.geom_contype[g] or model.geom_conaffinity[g]):
+                    continue
+                mat = np.zeros(9)
+                mujoco.mju_quat2Mat(mat, model.geom_quat[g])
+                rot, pos, size = mat.reshape(3, 3), model.geom_pos[g], model.geom_size[g]
+                gtype = model.geom_type[g]
+                if gtype == mujoco.mjtGeom.mjGEOM_CAPSULE:
+                    pts = [pos + rot[:, 2] * size[1], pos - rot[:, 2] * size[1]]
+                    rads = [size[0]] * 2
+                elif gtype == mujoco.mjtGeom.mjGEOM_SPHERE:
+                    pts, rads = [pos], [size[0]]
+                elif gtype == mujoco.mjtGeom.mjGEOM_BOX:
+                    signs = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], dtype=float)
+                    pts = list(pos + (signs * size[:3]) @ rot.T) + [pos]
+                    rads = [0.0] * 8 + [float(size[:3].min())]
+                else:
+                    continue
+                bodies.extend([body] * len(pts))
+                local.extend(pts)
+                radius.extend(rads)
+    return ProbePoints(np.asarray(bodies, dtype=np.int64), np.asarray(local, dtype=np.float64).reshape(-1, 3),
+                       np.asarray(radius, dtype=np.float64))

@@ -1,0 +1,89 @@
+"""Hands vs the object's convex hull: distances, push-out of targets, probe points, and the IK keeping out."""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+import pytest
+import trimesh
+
+from robot_hoi.retarget.ik import IKSolver
+from robot_hoi.retarget.object_contact import HullPlanes, hand_probe_points
+from robot_hoi.retarget.targets import TargetMapping, map_positions
+
+CUBE = HullPlanes.from_vertices(trimesh.creation.box(extents=(1.0, 1.0, 1.0)).vertices)
+_GRID = np.array([[u, v] for u in np.linspace(-0.5, 0.5, 11) for v in np.linspace(-0.5, 0.5, 11)])
+CUBE_SAMPLES = np.concatenate([np.insert(_GRID, axis, side, axis=1) for axis in range(3) for side in (-0.5, 0.5)])
+
+
+def test_signed_distance_and_push_out_on_a_cube():
+    pts = np.array([[0.0, 0.0, 0.0], [0.45, 0.0, 0.0], [0.0, 0.0, 0.8], [0.0, -0.52, 0.1]])
+    dist, face = CUBE.signed_distance(pts)
+    np.testing.assert_allclose(dist, [-0.5, -0.05, 0.3, 0.02], atol=1e-12)
+    np.testing.assert_allclose(CUBE.normals[face[1]], [1.0, 0.0, 0.0], atol=1e-12)
+    out = CUBE.push_out(pts, clearance=0.01)
+    np.testing.assert_allclose(out[1], [0.51, 0.0, 0.0], atol=1e-12)  # out through the nearest face
+    np.testing.assert_allclose(out[2:], pts[2:])  # already clear: untouched
+    assert np.all(CUBE.signed_distance(out)[0] >= 0.01 - 1e-12)
+
+
+def test_anchored_targets_inside_the_object_are_pushed_to_its_surface():
+    # A cube resting at the origin (no lift), a hand joint 3 cm inside its +x face: anchored and moved out.
+    T = 1
+    human = np.array([[[0.47, 0.0, 0.5], [3.0, 0.0, 1.0]]])
+    obj_pos, obj_quat = np.array([[0.0, 0.0, 0.5]]), np.array([[0.0, 0.0, 0.0, 1.0]])
+    pts = CUBE_SAMPLES
+    targets, a, _, _ = map_positions(human, np.zeros((T, 2)), obj_pos, obj_quat, pts, 0.5, TargetMapping(),
+                                     hull=CUBE)
+    assert a[0, 0] == pytest.approx(0.8)  # 3 cm from the nearest surface sample
+    scaled = np.array([0.5 * 0.47, 0.0, 0.5 * 0.5])
+    pushed = np.array([0.51, 0.0, 0.5])  # out through the +x face to the 1 cm clearance
+    np.testing.assert_allclose(targets[0, 0], 0.8 * pushed + 0.2 * scaled, atol=1e-9)
+    off, _, _, _ = map_positions(human, np.zeros((T, 2)), obj_pos, obj_quat, pts, 0.5,
+                                 TargetMapping(object_clearance=None), hull=CUBE)
+    np.testing.assert_allclose(off[0, 0], 0.8 * human[0, 0] + 0.2 * scaled, atol=1e-9)
+
+
+# A fixed-base arm whose "hand" carries a capsule finger; the object is a 1 m cube centred at (0.9, 0, 0.5).
+ARM = """
+<mujoco>
+  <compiler angle="radian"/>
+  <worldbody>
+    <body name="base" pos="0 0 0.5">
+      <joint name="yaw" axis="0 0 1" range="-3 3"/>
+      <joint name="pitch" axis="0 1 0" range="-1.5 1.5"/>
+      <geom type="capsule" fromto="0 0 0 0.3 0 0" size="0.02" contype="0" conaffinity="0"/>
+      <body name="wrist" pos="0.3 0 0">
+        <joint name="slide" type="slide" axis="1 0 0" range="-0.2 0.2"/>
+        <geom name="finger" type="capsule" fromto="0 0 0 0.1 0 0" size="0.01"/>
+        <site name="tip" pos="0.1 0 0"/>
+      </body>
+    </body>
+  </worldbody>
+</mujoco>
+"""
+
+
+def test_probe_points_follow_the_collision_geoms():
+    model = mujoco.MjModel.from_xml_string(ARM)
+    wrist = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, "wrist")
+    probes = hand_probe_points(model, [wrist])
+    assert len(probes) == 2  # the finger capsule's two end centres; the non-colliding arm capsule is skipped
+    np.testing.assert_allclose(sorted(probes.local[:, 0]), [0.0, 0.1], atol=1e-12)
+    np.testing.assert_allclose(probes.radius, 0.01)
+
+
+def test_ik_keeps_the_hand_out_of_the_object():
+    model = mujoco.MjModel.from_xml_string(ARM)
+    wrist = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, "wrist")
+    solver = IKSolver(model, ["tip"], ["yaw", "pitch", "slide"], probes=hand_probe_points(model, [wrist]))
+    T = 3
+    target = np.tile([[[0.6, 0.0, 0.5]]], (T, 1, 1))  # 20 cm inside the cube's -x face (at x = 0.4)
+    track = (CUBE, np.tile([0.9, 0.0, 0.5], (T, 1)), np.tile([1.0, 0.0, 0.0, 0.0], (T, 1)))
+    free = solver.solve(target, np.ones((T, 1)), object_track=track)
+    # The fingertip probe (radius 1 cm) stops at the face, give or take the soft constraint's 1 cm of give
+    # (link weight 1 x 20 cm of error against object weight 20).
+    assert free.object_penetration.max() < 0.015
+    assert free.link_pos[-1, 0, 0] < 0.405
+    ignored = solver.solve(target, np.ones((T, 1)))  # without the object the tip goes in
+    assert ignored.link_pos[-1, 0, 0] > 0.55
