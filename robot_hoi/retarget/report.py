@@ -26,6 +26,18 @@ def residual_by_group(residual: np.ndarray, human_names) -> dict[str, dict[str, 
     return out
 
 
+def anchored_residual(residual: np.ndarray, anchor: np.ndarray, human_names, threshold: float = 0.5) -> dict:
+    """Wrist and fingertip residuals only where those links are anchored to the object (a > threshold): free
+    fingertips are barely weighted (the Inspire hand is longer than a scaled human hand), held ones matter."""
+    out = {}
+    for g in ("wrists", "fingers"):
+        cols = np.array([link_group(h) == g for h in human_names])
+        held = residual[:, cols][anchor[:, cols] > threshold]
+        if held.size:
+            out[g] = {"mean_cm": _cm(held.mean()), "max_cm": _cm(held.max())}
+    return out
+
+
 def hand_surface_distance(dist: np.ndarray, human_names, side: str) -> np.ndarray:
     """(T,) closest approach of one hand (wrist or any fingertip) to the object surface."""
     cols = [i for i, h in enumerate(human_names) if hand_side(h) == side]
@@ -64,6 +76,7 @@ def build_report(result, floor_height: float = 0.0) -> dict:
         "scale": round(motion.scale, 4),
         "ik_seconds": round(result.seconds, 3),
         "position_error": residual_by_group(motion.residual, names),
+        "position_error_anchored": anchored_residual(motion.residual, motion.anchor, names),
         "feet": {
             "max_penetration_cm": _cm(penetration.max()),
             "frames_penetrating_over_5mm": int((penetration > 0.005).sum()),
@@ -102,6 +115,8 @@ def format_report(report: dict) -> str:
     lines.append("position error (cm)   mean    max")
     for group, r in report["position_error"].items():
         lines.append(f"  {group:<18}{r['mean_cm']:7.2f}{r['max_cm']:7.2f}")
+    for group, r in report.get("position_error_anchored", {}).items():
+        lines.append(f"  {group + ' (anchored)':<18}{r['mean_cm']:7.2f}{r['max_cm']:7.2f}")
     feet = report["feet"]
     lines.append(f"feet: max penetration {feet['max_penetration_cm']} cm, "
                  f"{feet['frames_penetrating_over_5mm']} frames deeper than 5 mm")

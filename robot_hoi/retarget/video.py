@@ -120,6 +120,7 @@ def render_matplotlib(motion, model, path: Path, object_points_local=None, size=
     parents = model.body_parentid
     fig = plt.figure(figsize=(size[0] / 100, size[1] / 100), dpi=100)
     ax = fig.add_subplot(projection="3d")
+    fig.subplots_adjust(left=0.0, right=1.0, bottom=0.0, top=0.95)
     with atomic_path(path) as tmp:
         with imageio.get_writer(tmp, fps=motion.fps / stride, codec="libx264", macro_block_size=8,
                                 format="FFMPEG") as writer:
