@@ -22,6 +22,9 @@ def _add_loading_options(p: argparse.ArgumentParser) -> None:
         "--objects", metavar="DIR", help="folder with <object>/<object>.obj (default: <clip dir>/../objects)"
     )
     p.add_argument(
+        "--object-name", metavar="NAME", help="the object when the file is not named subX_OBJECT_NNN"
+    )
+    p.add_argument(
         "--object-optional", action="store_true", help="go on without the object mesh (no inferred contacts)"
     )
     p.add_argument(
@@ -40,6 +43,7 @@ def _load(args: argparse.Namespace):
     return load_clip(
         args.clip,
         objects_dir=args.objects,
+        object_name=args.object_name,
         object_optional=args.object_optional,
         repair_missing=args.repair,
         min_duration_s=args.min_duration,

@@ -55,7 +55,7 @@ def _load_object(path: Path, name: str, objects_dir, optional: bool) -> tuple[Ob
         if optional:
             return None, ["object unknown (name is not subX_OBJECT_NNN): contacts not inferred"]
         raise DataError(
-            f"{path}: cannot tell the object from the file name (expected subX_OBJECT_NNN); name it"
+            f"{path}: cannot tell the object from the file name (expected subX_OBJECT_NNN); name it (--object-name)"
         )
     folder = Path(objects_dir) if objects_dir is not None else default_objects_dir(path)
     try:

@@ -1,10 +1,13 @@
 """The reader on the real reference clips in ../shared (skipped without it)."""
 
+import json
+
 import numpy as np
 import pytest
 import torch
 from scipy.spatial.transform import Rotation
 
+from robot_hoi.cli import main
 from robot_hoi.data.clip import load_clip
 from robot_hoi.data.intermimic import read_intermimic_matrix
 from robot_hoi.data.kinematics import bone_offsets
@@ -20,13 +23,15 @@ def _all_clips(motions):
     return sorted((motions / "clips").glob("*.pt")) + sorted((motions / "physics_corrected").glob("*.pt"))
 
 
-def test_every_reference_clip_loads_validates_and_summarises(motions):
+def test_every_reference_clip_loads_validates_and_inspects(motions, capsys):
     paths = _all_clips(motions)
     assert len(paths) == 8
     for path in paths:
         clip = load_clip(path)
         validate_clip(clip, path=path)
-        report = clip_summary(clip, str(path))
+        capsys.readouterr()
+        assert main(["data", "inspect", str(path), "--json"]) == 0
+        report = json.loads(capsys.readouterr().out)
         assert report["frames"] == clip.num_frames and report["object"]["loaded"]
         assert clip.subject_height_m == SUBJECT_HEIGHTS_M[clip.subject] and clip.height_source == "table"
         assert clip.license.startswith("CC BY-NC-SA 4.0")
@@ -112,3 +117,24 @@ def test_missing_objects_dir_fails_unless_optional(motions, tmp_path):
     clip = load_clip(path, objects_dir=tmp_path, object_optional=True)
     assert clip.object is None and not clip.inferred_contact.any()
     assert any("object not loaded" in p for p in clip.problems)
+
+
+def test_object_name_for_a_renamed_file(motions, tmp_path, capsys):
+    path = tmp_path / "take1.pt"
+    path.write_bytes((motions / "clips" / "sub3_largebox_003.pt").read_bytes())
+    assert main(["data", "inspect", str(path)]) == 2
+    assert "--object-name" in capsys.readouterr().err
+    argv = [
+        "data",
+        "inspect",
+        str(path),
+        "--object-name",
+        "largebox",
+        "--objects",
+        str(motions / "objects"),
+        "--json",
+    ]
+    assert main(argv) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["object"]["name"] == "largebox" and report["height_source"] == "estimated"
+    assert report["subject_height_m"] == pytest.approx(1.941, abs=0.04)  # skeleton estimate vs the table
