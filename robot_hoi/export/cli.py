@@ -17,6 +17,12 @@ def register(subparsers) -> None:
                    help="model_*.pt (default: the newest checkpoint under runs/)")
     o.add_argument("-o", "--output", default=None, help="output .onnx (default policies/<run>-<group>.onnx)")
     o.add_argument("--recorded", type=int, default=1000, help="recorded observations to verify against")
+    o.add_argument("--untrained", action="store_true",
+                   help="export a freshly initialised deployable (student-observation) policy for development, "
+                        "with the reference motion of --data (default: the embedded clip)")
+    o.add_argument("--data", nargs="*", default=None, help="with --untrained: the clip to track")
+    o.add_argument("--embodiment", default="g1_inspire", help="with --untrained")
+    o.add_argument("--seed", type=int, default=0, help="with --untrained")
     o.set_defaults(func=run_onnx)
     c = sub.add_parser("check", help="check an ONNX policy file against the deploy contract")
     c.add_argument("file")
@@ -34,6 +40,8 @@ def newest_checkpoint(root: Path = REPO_ROOT / "runs") -> Path:
 
 
 def run_onnx(args: argparse.Namespace) -> int:
+    if args.untrained:
+        return run_untrained(args)
     import numpy as np
     import torch
 
@@ -101,4 +109,63 @@ def run_check(args: argparse.Namespace) -> int:
 
             check_against_embodiment(contract, resolve_embodiment_path(args.embodiment))
             print(f"matches embodiment {args.embodiment}")
+    return 0
+
+
+def record_observations(env, policy_fn, group: str, count: int):
+    """Observations of `group` met while running `policy_fn` in `env` (for export verification)."""
+    import numpy as np
+    import torch
+
+    recorded = []
+    obs = env.reset()
+    with torch.no_grad():
+        while sum(len(r) for r in recorded) < count:
+            recorded.append(obs[group].numpy().copy())
+            obs, *_ = env.step(policy_fn(obs))
+    return np.concatenate(recorded)[:count]
+
+
+def run_untrained(args: argparse.Namespace) -> int:
+    """A freshly initialised deployable policy + its motion sidecar: what deploy and sim2sim run before training."""
+    import torch
+
+    from deploy.motion import file_sha256
+    from robot_hoi.embodiment import build_model, load_embodiment
+    from robot_hoi.export.metadata import clip_identity, policy_metadata
+    from robot_hoi.export.motion_sidecar import deploy_motion
+    from robot_hoi.export.onnx_export import export_policy
+    from robot_hoi.rl.cli import PRESETS, TASK_CONFIG
+    from robot_hoi.rl.config import load_train_config
+    from robot_hoi.rl.models import ActorCritic
+    from robot_hoi.tasks.interaction import factory
+    from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg
+    from robot_hoi.tasks.interaction.mdp.observations import STUDENT_TERMS, student_observation_spec
+    from robot_hoi.utils.config import load_yaml_dataclass
+
+    embodiment = load_embodiment(args.embodiment)
+    env_cfg = load_yaml_dataclass(InteractionEnvCfg, TASK_CONFIG, ["num_envs=16", "psi.enabled=false"])
+    env_cfg.student_obs_terms = tuple(STUDENT_TERMS)
+    sources = factory.expand_sources(args.data)[:1]
+    clip = factory.load_source(sources[0])
+    env = factory.make_env([clip], env_cfg, embodiment)
+    torch.manual_seed(args.seed)
+    model = ActorCritic(env.obs_dims["student"], env.obs_dims["critic"], env.num_actions,
+                        load_train_config(PRESETS["fast"]).model).eval()
+    recorded = record_observations(env, lambda o: model.act_inference(o["student"]), "student", args.recorded)
+
+    out = Path(args.output) if args.output else POLICIES_DIR / "untrained.onnx"
+    motion_file = out.with_name(out.stem + ".motion.npz")
+    deploy_motion(env.references[0], source=str(motion_file)).save(motion_file)
+    metadata = policy_metadata(
+        embodiment, build_model(embodiment), policy_kind="untrained", obs_spec=student_observation_spec(env),
+        keyframes=env_cfg.student_keyframes, action_clip=env_cfg.action_clip,
+        clips=[clip_identity(clip, sources[0])],
+        reference={"file": motion_file.name, "sha256": file_sha256(motion_file)},
+    )
+    metadata["warmup_frames"] = int(env_cfg.warmup_frames)
+    report = export_policy(model.exported_policy(), env.obs_dims["student"], metadata, out, recorded_obs=recorded)
+    for line in report.lines():
+        print(line)
+    print(f"wrote {motion_file} (reference motion, {env.references[0].num_frames} frames)")
     return 0

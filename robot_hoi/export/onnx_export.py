@@ -90,7 +90,7 @@ def latency_ms(session, obs_dim: int, runs: int = 300) -> tuple[float, float]:
 def export_policy(policy: torch.nn.Module, obs_dim: int, metadata: dict, out: str | Path,
                   recorded_obs: np.ndarray | None = None, tolerance: float = 1e-4, seed: int = 0) -> ExportReport:
     """Export, verify, then write atomically. Raises UserError (nothing written) when verification fails."""
-    encoded = {k: v if isinstance(v, str) else json.dumps(v) for k, v in metadata.items()}
+    encoded = {k: json.dumps(v) for k, v in metadata.items()}  # the contract: every value JSON-encoded
     data = to_onnx_bytes(policy, obs_dim, encoded)
     session = ort_session(data)
     rng = np.random.default_rng(seed)

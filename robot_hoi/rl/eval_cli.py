@@ -93,10 +93,12 @@ def evaluate(env, model) -> dict[str, float]:
     obs = env.reset()
     finished: dict[str, list[torch.Tensor]] = {}
     counted = torch.zeros(env.num_envs, dtype=torch.bool)
+    returns = torch.zeros(env.num_envs)
     with torch.no_grad():
         for _ in range(env.max_episode_length + env.cfg.warmup_frames + 2):
             actions = model.act_inference(obs["policy"])
-            obs, _, terminated, truncated, extras = env.step(actions)
+            obs, reward, terminated, truncated, extras = env.step(actions)
+            returns += torch.where(counted, 0.0, reward)
             done = terminated | truncated
             new = done & ~counted
             if new.any():
@@ -113,6 +115,7 @@ def evaluate(env, model) -> dict[str, float]:
         "duration_s": stats["duration_s"].mean().item(),
         "E_h_cm": stats["E_h_cm"].mean().item(),
         "E_o_cm": stats["E_o_cm"].mean().item(),
+        "return": returns[counted].mean().item(),
         "clip_duration_s": env.total_frames / env.references[0].fps,
     }
 
