@@ -40,13 +40,13 @@ class RobotMotion:
     qpos: np.ndarray  # (T, nq): free base pos (3) + quat wxyz (4) + every model joint (fingers included)
     qvel: np.ndarray  # (T, nv) central finite differences (one-sided at the ends)
     joint_pos: np.ndarray  # (T, A) actuated joint positions in actuator (policy) order
-    link_pos: np.ndarray  # (T, L, 3) achieved link positions
+    link_pos: np.ndarray  # (T, L, 3) achieved positions of the link_map links (body origin or site)
     link_quat_wxyz: np.ndarray  # (T, L, 4)
-    target_pos: np.ndarray  # (T, L, 3) IK targets
+    target_pos: np.ndarray  # (T, L, 3) IK targets: the mapped human joints, aimed at each link's landmark
     object_pos: np.ndarray  # (T, 3) robot-space object pose
     object_quat_wxyz: np.ndarray  # (T, 4)
     anchor: np.ndarray  # (T, L) anchor weights from the targets
-    residual: np.ndarray  # (T, L) |link_pos - target| in metres
+    residual: np.ndarray  # (T, L) |landmark - target| in metres (landmarks.py; = link_pos where none is set)
     link_names: tuple[str, ...]
     human_names: tuple[str, ...]
     actuator_names: tuple[str, ...]
