@@ -99,20 +99,29 @@ def _symbolic_unpickle(data: bytes, path: Path):
 
 def _parse_tensor_record(record, path: Path) -> tuple[str, str, int, int, tuple[int, ...], tuple[int, ...]]:
     """-> (numpy dtype, storage key, numel, offset, shape, stride) from the symbolic pickle result."""
+    bad = DataError(f"{path}: not a single-tensor torch file (unexpected data.pkl structure)")
     try:
         kind, func, args = record
-        assert kind == "call" and func == ("torch._utils", "_rebuild_tensor_v2")
         pid_kind, pid = args[0]
-        assert pid_kind == "persistent_id" and pid[0] == "storage"
         storage_type, key, _location, numel = pid[1], pid[2], pid[3], pid[4]
         offset, shape, stride = args[1], tuple(args[2]), tuple(args[3])
-        assert isinstance(storage_type, _Global) and storage_type[0] == "torch"
-    except (AssertionError, TypeError, ValueError, IndexError) as exc:
-        raise DataError(f"{path}: not a single-tensor torch file (unexpected data.pkl structure)") from exc
+    except (TypeError, ValueError, IndexError) as exc:
+        raise bad from exc
+    expected = (
+        kind == "call"
+        and func == ("torch._utils", "_rebuild_tensor_v2")
+        and pid_kind == "persistent_id"
+        and pid[0] == "storage"
+        and isinstance(storage_type, _Global)
+        and storage_type[0] == "torch"
+        and all(isinstance(v, int) for v in (numel, offset, *shape, *stride))
+    )
+    if not expected:
+        raise bad
     dtype = _STORAGE_DTYPES.get(storage_type[1])
     if dtype is None:
         raise DataError(f"{path}: tensor storage type {storage_type[1]} is not supported")
-    return dtype, str(key), int(numel), int(offset), shape, stride
+    return dtype, str(key), numel, offset, shape, stride
 
 
 def read_torch_tensor(path: str | Path) -> np.ndarray:
