@@ -136,14 +136,21 @@ _DOMAINS: dict[int, object] = {}
 
 
 class DdsEndpoint:
-    """One DDS participant with a reader and a writer; shared by the body and the loopback robot."""
+    """One DDS participant with a reader (history: the newest sample only) and a writer.
+
+    With `on_sample`, samples are taken by our own thread blocked on a WaitSet (the loopback robot receiving
+    commands). Without it, the owner calls `take_latest()` (the body, once per control tick: the 500 Hz LowState
+    stream is then deserialised at the loop's rate, not 500 times a second). No DDS listeners: a listener runs in
+    cyclonedds' threads and deleting entities while one runs can deadlock. close() stops our thread first.
+    """
 
     def __init__(self, domain_id: int, interface: str | None, read_topic: str, read_type, write_topic: str,
-                 write_type, on_sample):
+                 write_type, on_sample=None):
         _require_cyclonedds()
-        from cyclonedds.core import Listener
+        from cyclonedds.core import InstanceState, ReadCondition, SampleState, ViewState, WaitSet
         from cyclonedds.domain import Domain, DomainParticipant
         from cyclonedds.pub import DataWriter
+        from cyclonedds.qos import Policy, Qos
         from cyclonedds.sub import DataReader
         from cyclonedds.topic import Topic
 
@@ -151,27 +158,47 @@ class DdsEndpoint:
         if config and domain_id not in _DOMAINS:  # cyclonedds allows one configured Domain per id and process
             _DOMAINS[domain_id] = Domain(domain_id, config)
         self.participant = DomainParticipant(domain_id)
-
-        self.callback_errors = 0
-
-        def on_data_available(reader) -> None:
-            for sample in reader.take(N=64):
-                try:
-                    on_sample(sample)
-                except Exception:  # a malformed sample must not kill the DDS thread; counted, then dropped
-                    self.callback_errors += 1
-                    log.debug("dropped a malformed %s sample", read_topic, exc_info=True)
-
         self.reader = DataReader(self.participant, Topic(self.participant, read_topic, read_type),
-                                 listener=Listener(on_data_available=on_data_available))
+                                 qos=Qos(Policy.History.KeepLast(1)))
         self.writer = DataWriter(self.participant, Topic(self.participant, write_topic, write_type))
+        self._on_sample = on_sample
+        self._topic_name = read_topic
+        self.callback_errors = 0
+        self._stop = threading.Event()
+        self._thread = None
+        if on_sample is not None:
+            self._waitset = WaitSet(self.participant)
+            self._waitset.attach(ReadCondition(self.reader, SampleState.Any | ViewState.Any | InstanceState.Any))
+            self._thread = threading.Thread(target=self._receive, name=f"dds-{read_topic}", daemon=True)
+            self._thread.start()
+
+    def take_latest(self):
+        """The newest sample not taken yet, or None."""
+        samples = self.reader.take(N=1)
+        return samples[-1] if samples else None
+
+    def _receive(self) -> None:
+        from cyclonedds.util import duration
+
+        timeout = duration(milliseconds=50)
+        while not self._stop.is_set():
+            self._waitset.wait(timeout)
+            for sample in self.reader.take(N=64):
+                try:
+                    self._on_sample(sample)
+                except Exception:  # a malformed sample must not kill the receiver; counted, then dropped
+                    self.callback_errors += 1
+                    log.debug("dropped a malformed %s sample", self._topic_name, exc_info=True)
 
     def write(self, msg) -> None:
         self.writer.write(msg)
 
     def close(self) -> None:
-        # Dropping the references lets cyclonedds delete the entities (participant owns reader/writer).
-        self.reader = self.writer = self.participant = None
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=2.0)
+        # Dropping the references lets cyclonedds delete the entities (the participant owns the rest).
+        self._waitset = self.reader = self.writer = self.participant = None
 
 
 class UnitreeDdsBody(Body):
@@ -183,7 +210,6 @@ class UnitreeDdsBody(Body):
         self.clock = clock or MonotonicClock()
         self.mode_pr = mode_pr
         self.check_state_crc = check_state_crc
-        self._lock = threading.Lock()
         self._latest: BodyState | None = None
         self._endpoint: DdsEndpoint | None = None
         self.states_received = 0
@@ -194,7 +220,7 @@ class UnitreeDdsBody(Body):
         T = idl_types()
         try:
             self._endpoint = DdsEndpoint(self.domain_id, self.interface, LOWSTATE_TOPIC, T.LowState_,
-                                         LOWCMD_TOPIC, T.LowCmd_, self._on_state)
+                                         LOWCMD_TOPIC, T.LowCmd_)
         except MissingDependencyError:
             raise
         except Exception as exc:  # cyclonedds raises DDSException on a bad interface / domain
@@ -205,15 +231,13 @@ class UnitreeDdsBody(Body):
             self._endpoint.close()
             self._endpoint = None
 
-    def _on_state(self, msg) -> None:
-        stamp = self.clock.now()
+    def _accept(self, msg, stamp: float) -> None:
         frame = idl_to_lowstate(msg)
         if self.check_state_crc and not frame.crc_ok():
-            with self._lock:
-                self.crc_errors += 1
+            self.crc_errors += 1
             return
         n = self.num_joints
-        state = BodyState(
+        self._latest = BodyState(
             q=frame.q[:n].astype(np.float64),
             dq=frame.dq[:n].astype(np.float64),
             imu_quat_wxyz=frame.imu_quat_wxyz.astype(np.float64),
@@ -222,22 +246,26 @@ class UnitreeDdsBody(Body):
             tau_est=frame.tau_est[:n].astype(np.float64),
             mode_machine=int(frame.mode_machine),
         )
-        with self._lock:
-            self._latest = state
-            self.states_received += 1
+        self.states_received += 1
 
     def read_state(self) -> BodyState | None:
+        """Take the newest LowState (if one arrived since the last call) and stamp it now.
+
+        The robot publishes at 500 Hz, so a new sample is at most ~2 ms old; when the robot falls silent no new
+        sample comes and the returned state keeps its old stamp (the runtime sees it go stale).
+        """
         if self._endpoint is None:
             raise BodyLinkError("DDS body is not connected")
-        with self._lock:
-            return self._latest
+        msg = self._endpoint.take_latest()
+        if msg is not None:
+            self._accept(msg, self.clock.now())
+        return self._latest
 
     def send(self, q: np.ndarray, dq: np.ndarray, kp: np.ndarray, kd: np.ndarray, tau: np.ndarray) -> None:
         if self._endpoint is None:
             raise BodyLinkError("DDS body is not connected")
         self._check_command(q, dq, kp, kd, tau)
-        with self._lock:
-            mode_machine = self._latest.mode_machine if self._latest is not None else 0
+        mode_machine = self._latest.mode_machine if self._latest is not None else 0
         frame = make_lowcmd(q, dq, kp, kd, tau, mode_machine=mode_machine, mode_pr=self.mode_pr)
         self._endpoint.write(lowcmd_to_idl(frame))
         self.commands_sent += 1
