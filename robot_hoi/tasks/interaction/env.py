@@ -67,7 +67,9 @@ class InteractionEnv:
         self.max_episode_length = cfg.max_episode_frames
         self.psi = PsiBuffer(cfg.psi, state_dim=layout.robot_nq + layout.robot_nv + 13, generator=self.generator)
         if cfg.psi.enabled:  # the buffer starts with the reference-derived states (RSI), supp. E.2 (i)
-            frames = torch.cat([torch.arange(s, e) for s, e in zip(self.clip_start.tolist(), self.clip_end.tolist(), strict=True)])
+            lo, hi = cfg.init.start_range
+            frames = torch.cat([torch.arange(int(s + lo * (e - s)), max(int(s + hi * (e - s)), int(s + lo * (e - s)) + 1))
+                                for s, e in zip(self.clip_start.tolist(), self.clip_end.tolist(), strict=True)])
             self.psi.seed_from_reference(self._reference_states(frames), frames)
         self._allocate()
         self.reset()
@@ -283,8 +285,10 @@ class InteractionEnv:
         self.psi.on_reset(env_ids)
 
     def _random_frames(self, clip: Tensor) -> Tensor:
+        lo, hi = self.cfg.init.start_range
         span = (self.clip_end[clip] - self.clip_start[clip]).float()
-        return self.clip_start[clip] + (torch.rand(clip.numel(), generator=self.generator) * span).long()
+        fraction = lo + (hi - lo) * torch.rand(clip.numel(), generator=self.generator)
+        return self.clip_start[clip] + (fraction * span).long()
 
     def _reference_states(self, frames: Tensor) -> Tensor:
         """Robot + object states of the IK reference at `frames`, with joint noise (RSI)."""

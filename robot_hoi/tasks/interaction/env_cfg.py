@@ -62,6 +62,7 @@ class InitCfg:
     stand_start_probability: float = 0.3   # start at clip frame 0 from the default stand (with warmup)
     spawn_noise_xy: float = 0.05           # m, stand start placement noise
     joint_noise: float = 0.05              # rad, reference-state initialisation noise
+    start_range: tuple[float, float] = (0.0, 1.0)  # clip fraction from which reference starts are drawn
 
 
 @dataclass
