@@ -1,0 +1,162 @@
+"""Inspire hand over CAN 2.0B (python-can: socketcan, slcan, pcan, virtual, ... chosen by name).
+
+Register groups travel in chunks of at most 8 bytes (see can_frames). By default all chunks of one group are
+sent back to back and their replies collected together (`pipeline=True`): every chunk has its own identifier,
+so replies cannot be confused, and the bus is not left idle between frames. Set pipeline=False to wait for each
+reply before sending the next request, for firmware that cannot queue requests.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import Counter
+
+import can
+import numpy as np
+
+from deploy.errors import HandFaultError
+from deploy.hands import tables
+from deploy.hands.can_frames import MAX_HAND_ID, RW_READ, RW_WRITE, Pending, chunks, classify_reply
+from deploy.hands.register_bus import AttemptFailed, PortUnavailable, RegisterHandBus
+from deploy.hands.tables import Register
+
+DEFAULT_TIMEOUT_S = 0.02
+OPEN_ERRORS = (can.CanError, OSError, ValueError, ImportError, NotImplementedError)
+
+
+class CanHandBus(RegisterHandBus):
+    transport = "can"
+    batch_state_reads = True  # all state chunks go out back to back (one reply wait per cycle)
+
+    def __init__(
+        self,
+        side: str,
+        channel: str,
+        *,
+        interface: str = "socketcan",
+        hand_id: int = 1,
+        bitrate: int = 1_000_000,
+        timeout: float = DEFAULT_TIMEOUT_S,
+        retries: int = 2,
+        chunk_bytes: int = 8,
+        pipeline: bool = True,
+        safe_pose="hold",
+        bus_options: dict | None = None,
+    ):
+        self.channel = channel
+        self.interface = interface
+        self.bitrate = int(bitrate)
+        self.chunk_bytes = int(chunk_bytes)
+        self.pipeline = bool(pipeline)
+        self.bus_options = dict(bus_options or {})
+        self.error_frames = 0  # CAN error frames seen on the bus while waiting for replies
+        self._bus: can.BusABC | None = None
+        super().__init__(
+            side,
+            hand_id=hand_id,
+            timeout=timeout,
+            retries=retries,
+            safe_pose=safe_pose,
+            hand_id_range=(1, MAX_HAND_ID),
+        )
+
+    def link_description(self) -> str:
+        return f"CAN {self.interface}:{self.channel} @ {self.bitrate / 1e6:g} Mbit/s"
+
+    def _open(self) -> None:
+        try:
+            self._bus = can.Bus(
+                interface=self.interface, channel=self.channel, bitrate=self.bitrate, **self.bus_options
+            )
+        except OPEN_ERRORS as exc:
+            self._bus = None
+            raise PortUnavailable(f"{type(exc).__name__}: {exc}") from exc
+
+    def _close(self) -> None:
+        if self._bus is not None:
+            try:
+                self._bus.shutdown()
+            except (can.CanError, OSError):
+                pass
+            self._bus = None
+
+    def _read_block(self, regs: tuple[Register, ...]) -> list[np.ndarray]:
+        return self._read_blocks([regs])[0]
+
+    def _read_blocks(self, regs_per_block: list[tuple[Register, ...]]) -> list[list[np.ndarray]]:
+        plan = [
+            [(reg, self._pending(RW_READ, reg, lambda a, n: bytes([n]))) for reg in regs]
+            for regs in regs_per_block
+        ]
+        replies = self._exchange([p for block in plan for _, pend in block for p in pend])
+        return [
+            [tables.decode_values(reg, b"".join(replies[p] for p in pend)) for reg, pend in block]
+            for block in plan
+        ]
+
+    def _pending(self, rw: int, reg: Register, payload) -> list[Pending]:
+        return [
+            Pending(rw, a, self.hand_id, payload(a, n), reg.name)
+            for a, n in chunks(reg, reg.can_address, self.chunk_bytes)
+        ]
+
+    def _write_register(self, reg: Register, values: np.ndarray) -> None:
+        raw = tables.encode_values(reg, values)
+        base = reg.can_address
+        pending = self._pending(RW_WRITE, reg, lambda a, n: raw[a - base : a - base + n])
+        acks = self._exchange(pending)
+        refused = [p for p in pending if acks[p] not in (b"", b"\x01")]
+        if refused:
+            raise HandFaultError(
+                f"{self.name}: hand refused the write to {reg.name} at {refused[0].address} "
+                f"(ack data {acks[refused[0]].hex(' ')})"
+            )
+
+    def _exchange(self, pending: list[Pending]) -> dict[Pending, bytes]:
+        bus = self._bus
+        if bus is None:
+            raise AttemptFailed("disconnected", "CAN bus is closed")
+        got: dict[Pending, bytes] = {}
+        seen: Counter = Counter()
+        deadline = time.monotonic() + self.timeout
+        try:
+            while bus.recv(0) is not None:  # late replies to an earlier try must not answer this one
+                pass
+            groups = [pending] if self.pipeline else [[p] for p in pending]
+            for group in groups:
+                for p in group:
+                    bus.send(p.message(), timeout=self.timeout)
+                self._collect(bus, {p.arbitration_id: p for p in group}, got, seen, deadline)
+        except can.CanError as exc:
+            raise AttemptFailed("disconnected", f"{type(exc).__name__}: {exc}") from exc
+        return got
+
+    def _collect(
+        self, bus: can.BusABC, outstanding: dict[int, Pending], got: dict, seen: Counter, deadline: float
+    ) -> None:
+        while outstanding:
+            remaining = deadline - time.monotonic()
+            msg = bus.recv(remaining) if remaining > 0 else None
+            if msg is None:
+                break
+            pend = outstanding.get(msg.arbitration_id) if not msg.is_error_frame else None
+            if msg.is_error_frame:
+                self.error_frames += 1
+                seen["error_frame"] += 1
+                continue
+            if pend is None:
+                continue  # traffic for another hand or another node
+            verdict = classify_reply(msg, pend)
+            if verdict == "ok":
+                got[pend] = bytes(msg.data)
+                del outstanding[msg.arbitration_id]
+            else:
+                seen[verdict] += 1
+        if outstanding:
+            missing = ", ".join(f"{p.register}@{p.address}" for p in outstanding.values())
+            kind = next((k for k in ("error_frame", "partial", "garbled") if seen[k]), "timeout")
+            raise AttemptFailed(
+                kind,
+                f"no good reply for address(es) {missing} within {self.timeout * 1000:.0f} ms"
+                + (f" ({dict(seen)})" if seen else ""),
+            )
