@@ -8,19 +8,25 @@ reply before sending the next request, for firmware that cannot queue requests.
 
 from __future__ import annotations
 
+import logging
+import socket
+import struct
 import time
 from collections import Counter
 
 import can
 import numpy as np
 
-from deploy.errors import HandFaultError
 from deploy.hands import tables
 from deploy.hands.can_frames import MAX_HAND_ID, RW_READ, RW_WRITE, Pending, chunks, classify_reply
 from deploy.hands.register_bus import AttemptFailed, PortUnavailable, RegisterHandBus
 from deploy.hands.tables import Register
 
 DEFAULT_TIMEOUT_S = 0.02
+SOL_CAN_RAW = getattr(socket, "SOL_CAN_RAW", 101)  # linux/can.h: SOL_CAN_BASE + CAN_RAW
+CAN_RAW_ERR_FILTER = 2  # linux/can/raw.h; Python's socket module does not export it
+CAN_ERR_MASK = getattr(socket, "CAN_ERR_MASK", 0x1FFFFFFF)
+log = logging.getLogger("deploy.hands")
 OPEN_ERRORS = (can.CanError, OSError, ValueError, ImportError, NotImplementedError)
 
 
@@ -71,6 +77,18 @@ class CanHandBus(RegisterHandBus):
         except OPEN_ERRORS as exc:
             self._bus = None
             raise PortUnavailable(f"{type(exc).__name__}: {exc}") from exc
+        self._receive_error_frames()
+
+    def _receive_error_frames(self) -> None:
+        """SocketCAN delivers error frames only when asked (CAN_RAW_ERR_FILTER); other interfaces report them
+        on their own or not at all."""
+        sock = getattr(self._bus, "socket", None)
+        if self.interface != "socketcan" or sock is None:
+            return
+        try:
+            sock.setsockopt(SOL_CAN_RAW, CAN_RAW_ERR_FILTER, struct.pack("=I", CAN_ERR_MASK))
+        except OSError as exc:
+            log.debug("%s: error frames stay off: %s", self.name, exc)
 
     def _close(self) -> None:
         if self._bus is not None:
@@ -107,9 +125,8 @@ class CanHandBus(RegisterHandBus):
         acks = self._exchange(pending)
         refused = [p for p in pending if acks[p] not in (b"", b"\x01")]
         if refused:
-            raise HandFaultError(
-                f"{self.name}: hand refused the write to {reg.name} at {refused[0].address} "
-                f"(ack data {acks[refused[0]].hex(' ')})"
+            raise self._fault(
+                f"hand refused the write to {reg.name} at {refused[0].address} (ack data {acks[refused[0]].hex(' ')})"
             )
 
     def _exchange(self, pending: list[Pending]) -> dict[Pending, bytes]:

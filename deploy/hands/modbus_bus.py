@@ -28,7 +28,6 @@ from pymodbus.pdu.register_message import (
     WriteSingleRegisterResponse,
 )
 
-from deploy.errors import HandFaultError
 from deploy.hands import tables
 from deploy.hands.register_bus import AttemptFailed, PortUnavailable, RegisterHandBus
 from deploy.hands.tables import Register
@@ -199,8 +198,8 @@ class ModbusHandBus(RegisterHandBus):
             raise AttemptFailed("garbled", str(exc)) from exc
         if response.isError():
             code = getattr(response, "exception_code", 0)
-            raise HandFaultError(
-                f"{self.name}: Modbus exception {code} ({EXCEPTION_NAMES.get(code, 'unknown')}) "
+            raise self._fault(
+                f"Modbus exception {code} ({EXCEPTION_NAMES.get(code, 'unknown')}) "
                 f"for function 0x{function_code:02X} on {register.name}"
             )
         return response

@@ -113,6 +113,7 @@ class RegisterHandBus(HandBus):
         self._connected = False
         self._needs_reopen = False
         self._last_tries = 0
+        self._attempt = 0
 
     # ----------------------------------------------------------------- transport hooks
     @abstractmethod
@@ -327,6 +328,13 @@ class RegisterHandBus(HandBus):
             raise ValueError(f"{name} value outside {reg.low}..{reg.high}: {values.tolist()}")
         self._run(f"write {name}", lambda: self._write_register(reg, values))
 
+    def _fault(self, what: str) -> HandFaultError:
+        """A device-side rejection, raised from inside a try (never retried: the hand answered)."""
+        tries = self.retries + 1
+        return HandFaultError(
+            f"{self.name}: {what} (on try {self._attempt} of {tries}; device faults are not retried)"
+        )
+
     def _require_connected(self) -> None:
         if not self._connected:
             raise HandLinkError(f"{self.name}: not connected (call connect() first)")
@@ -350,6 +358,7 @@ class RegisterHandBus(HandBus):
             self.stats.attempts += 1
             if attempt > 1:
                 self.stats.retries += 1
+            self._attempt = attempt
             try:
                 if self._needs_reopen:
                     self._reopen()

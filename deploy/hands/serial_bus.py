@@ -7,7 +7,6 @@ import time
 import numpy as np
 import serial
 
-from deploy.errors import HandFaultError
 from deploy.hands import frames, tables
 from deploy.hands.frames import CMD_READ, CMD_WRITE, REPLY_HEADER, WRITE_ACK_OK, FrameParser
 from deploy.hands.register_bus import AttemptFailed, PortUnavailable, RegisterHandBus
@@ -89,9 +88,7 @@ class SerialHandBus(RegisterHandBus):
         request = frames.encode_write(self.hand_id, reg.address, tables.encode_values(reg, values))
         ack = self._exchange(request, CMD_WRITE, reg.address, 1)
         if ack.payload[0] != WRITE_ACK_OK:
-            raise HandFaultError(
-                f"{self.name}: hand refused the write to {reg.name} (ack byte 0x{ack.payload[0]:02X})"
-            )
+            raise self._fault(f"hand refused the write to {reg.name} (ack byte 0x{ack.payload[0]:02X})")
 
     def _exchange(self, request: bytes, cmd: int, address: int, payload_len: int) -> frames.Frame:
         port = self._serial

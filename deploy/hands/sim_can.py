@@ -21,7 +21,8 @@ from deploy.hands.simulated import SimulatedHand
 _CLOCKS: weakref.WeakValueDictionary[str, LineClock] = weakref.WeakValueDictionary()
 _CLOCKS_LOCK = threading.Lock()
 
-WRITE_ACK = b"\x01"  # the manual says the ack has DLC 1; its content is not documented
+WRITE_ACK = b"\x01"  # the manual says the ack has DLC 1; its content is not documented (0x01 as on RS485)
+WRITE_REFUSED = b"\x00"
 
 
 def _clock_for(channel: str) -> LineClock:
@@ -105,8 +106,11 @@ class SimulatedCanHand(SimulatedHand):
             reply_data = self.registers.read(address, data[0])
         else:
             self.requests[("write", name)] += 1
-            self.registers.write(address, data)
-            reply_data = WRITE_ACK
+            if self._take_refusal():
+                reply_data = WRITE_REFUSED
+            else:
+                self.registers.write(address, data)
+                reply_data = WRITE_ACK
         self._reply(bus, msg.arbitration_id, reply_data, frame_bits(len(data)), arrival)
 
     def _reply(

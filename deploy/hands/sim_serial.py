@@ -98,8 +98,10 @@ class SimulatedSerialHand(_PtyHand):
             reply = frames.encode_read_reply(frame.hand_id, frame.address, data)
         elif frame.cmd == CMD_WRITE:
             self.requests[("write", name)] += 1
-            self.registers.write(frame.address, frame.payload)
-            reply = frames.encode_write_ack(frame.hand_id, frame.address)
+            accepted = not self._take_refusal()
+            if accepted:
+                self.registers.write(frame.address, frame.payload)
+            reply = frames.encode_write_ack(frame.hand_id, frame.address, ok=accepted)
         else:
             return
         request_size = len(frame.payload) + 3 + frames.OVERHEAD
@@ -145,24 +147,27 @@ class SimulatedModbusHand(_PtyHand):
     def _handle(self, request: ModbusPDU, arrival: float) -> None:
         if request.dev_id not in (self.hand_id, 0):
             return  # another slave on the bus
-        response = self._execute(request)
-        if request.dev_id == 0:
-            return  # broadcast: act, never answer
-        if self._exception_faults > 0:
-            self._exception_faults -= 1
+        is_write = isinstance(request, WriteSingleRegisterRequest | WriteMultipleRegistersRequest)
+        is_read = isinstance(request, ReadHoldingRegistersRequest)
+        group = self.registers.group_at(request.address)
+        name = group[1].name if group else f"@{request.address}"
+        self.requests[("write" if is_write else "read" if is_read else "other", name)] += 1
+        if self._exception_faults > 0 or (is_write and self._take_refusal()):
+            self._exception_faults = max(0, self._exception_faults - 1)
             self.faults_applied["exception"] += 1
             response = ExceptionResponse(request.function_code, MODBUS_DEVICE_FAILURE)
+        else:
+            response = self._execute(request)
+        if request.dev_id == 0:
+            return  # broadcast: act, never answer
         response.dev_id = self.hand_id
         response.transaction_id = 0
         request_size = len(self._framer.buildFrame(request))
         self._send(request_size, self._framer.buildFrame(response), arrival, avoid=bytes([self.hand_id]))
 
     def _execute(self, request: ModbusPDU) -> ModbusPDU:
-        group = self.registers.group_at(request.address)
-        name = group[1].name if group else f"@{request.address}"
         fc = request.function_code
         if isinstance(request, ReadHoldingRegistersRequest) and fc == 3:
-            self.requests[("read", name)] += 1
             if not 1 <= request.count <= MODBUS_MAX_READ:
                 return ExceptionResponse(fc, 3)
             words = self.registers.modbus_read(request.address, request.count)
@@ -170,15 +175,12 @@ class SimulatedModbusHand(_PtyHand):
                 return ExceptionResponse(fc, MODBUS_ILLEGAL_ADDRESS)
             return ReadHoldingRegistersResponse(registers=words)
         if isinstance(request, WriteSingleRegisterRequest):
-            self.requests[("write", name)] += 1
             if not self.registers.modbus_write(request.address, [int(request.registers[0])]):
                 return ExceptionResponse(fc, MODBUS_ILLEGAL_ADDRESS)
             return WriteSingleRegisterResponse(address=request.address, registers=list(request.registers))
         if isinstance(request, WriteMultipleRegistersRequest):
-            self.requests[("write", name)] += 1
             words = [int(w) for w in request.registers]
             if len(words) != request.count or not self.registers.modbus_write(request.address, words):
                 return ExceptionResponse(fc, MODBUS_ILLEGAL_ADDRESS)
             return WriteMultipleRegistersResponse(address=request.address, count=request.count)
-        self.requests[("other", f"fc{fc}")] += 1
         return ExceptionResponse(fc, MODBUS_ILLEGAL_FUNCTION)

@@ -11,7 +11,7 @@ against it is honest; pass pace=False to answer as fast as possible.
 
 Fault injection applies to the next replies in the order it was asked for: drop_next, corrupt_checksum_next,
 garble_next, partial_next, noise_before_next (noise then a good reply: the host must resync) and, for CAN,
-error_frame_next. On CAN there is no software checksum, so corrupt_checksum_next sends an error frame in place
+error_frame_next; refuse_writes_next answers writes with a refusal, and set_error_bits sets ERROR bits. On CAN there is no software checksum, so corrupt_checksum_next sends an error frame in place
 of the reply (what a CRC error looks like to the host), garble_next a reply of the wrong length and
 partial_next a reply cut short.
 """
@@ -65,6 +65,7 @@ class SimulatedHand:
         self.replies_sent = 0
         self.wire_bits = 0  # line bits of every request this hand answered and of its replies
         self._faults: deque[str] = deque()
+        self._refusals = 0  # writes still to be refused (NACK / Modbus exception)
         self._faults_lock = threading.Lock()
         self._rng = random.Random(seed)
         self._stop = threading.Event()
@@ -158,6 +159,20 @@ class SimulatedHand:
         if self.transport != "can":
             raise ValueError("error frames exist only on CAN")
         self._queue_fault("error_frame", n)
+
+    def refuse_writes_next(self, n: int = 1) -> None:
+        """The hand answers the next n writes but refuses them (vendor ack 0x00, CAN ack 0x00, Modbus
+        exception 4); nothing is written."""
+        with self._faults_lock:
+            self._refusals += int(n)
+
+    def _take_refusal(self) -> bool:
+        with self._faults_lock:
+            if self._refusals <= 0:
+                return False
+            self._refusals -= 1
+        self.faults_applied["refuse"] += 1
+        return True
 
     def pending_faults(self) -> int:
         with self._faults_lock:

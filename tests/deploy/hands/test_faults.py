@@ -142,6 +142,21 @@ def test_device_error_bits_raise_a_fault_with_the_state(hand_rig, transport):
     assert not bus.read_state().has_fault
 
 
+def test_a_refused_write_is_a_device_fault_and_not_retried(hand_rig, transport):
+    sim, bus, _ = hand_rig(transport)
+    bus.connect()
+    sim.refuse_writes_next(1)
+    expected = "Modbus exception 4" if transport == "modbus" else "hand refused the write to CLEAR_ERROR"
+    with pytest.raises(HandFaultError, match=expected) as info:
+        bus.clear_errors()
+    assert (
+        "right hand" in str(info.value) and "id 1" in str(info.value) and "on try 1 of 3" in str(info.value)
+    )
+    assert sim.requests[("write", "CLEAR_ERROR")] == 1 and bus.stats.retries == 0
+    bus.write_angles([123] * 6)
+    assert sim.model.commanded_angles.tolist() == [123] * 6
+
+
 def test_can_error_frames_are_counted_and_retried(hand_rig):
     sim, bus, _ = hand_rig("can")
     bus.connect()
