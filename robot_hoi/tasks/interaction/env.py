@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
+from robot_hoi.errors import UserError
 from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg
 from robot_hoi.tasks.interaction.mdp import observations as obs_terms
 from robot_hoi.tasks.interaction.mdp import rewards as reward_terms
@@ -40,6 +41,8 @@ class InteractionEnv:
     """Implements robot_hoi.rl.env.VecEnv."""
 
     def __init__(self, cfg: InteractionEnvCfg, scene: InteractionScene, references: list[ReferenceMotion]):
+        if cfg.action_offset not in ("reference", "default"):
+            raise UserError(f"env.action_offset must be 'reference' or 'default', not {cfg.action_offset!r}")
         self.cfg = cfg
         self.scene = scene
         self.device = torch.device("cpu")
@@ -117,7 +120,7 @@ class InteractionEnv:
 
     def step(self, actions: Tensor):
         self.actions = actions.detach().clamp(-self.cfg.action_clip, self.cfg.action_clip)
-        targets = self.default_joint_pos + self.action_scale * self.actions
+        targets = self.action_offset() + self.action_scale * self.actions
         self.backend.step(torch.maximum(torch.minimum(targets, self.ctrl_high), self.ctrl_low))
         self.episode_length += 1
         in_warmup = self.warmup_left > 0
@@ -148,6 +151,15 @@ class InteractionEnv:
         if done_ids.numel():
             self._reset_envs(done_ids)
         return self._observations(), reward, terminated, truncated, extras
+
+    def action_offset(self) -> Tensor:
+        """PD target for a zero action: the default pose, or (action_offset "reference") the reference joint
+        positions of the frame this step moves to, so that the policy learns corrections to the retarget."""
+        if self.cfg.action_offset == "default":
+            return self.default_joint_pos
+        next_index = torch.where(self.warmup_left > 0, self.ref_index,
+                                 torch.minimum(self.ref_index + 1, self._clip_end()))
+        return self.ref_joint_pos[next_index]
 
     # ---- state --------------------------------------------------------------------------------------------------
     def _clip_end(self) -> Tensor:
@@ -188,7 +200,10 @@ class InteractionEnv:
             self.ref.object_pos[:, None]
         self.w_d = reward_terms.interaction_weights(self.d, self.ref.d_hat)
         need = self.ref.hand_contact & (self.warmup_left == 0)[:, None]
-        self.contact_loss_frames = torch.where(need & ~self.hand_contact_found, self.contact_loss_frames + 1, 0)
+        distance = self.d.norm(dim=-1)
+        near = torch.stack([distance[:, ids].amin(-1) for ids in self.scene.hand_link_ids], dim=-1)
+        kept = self.hand_contact_found | (near < self.cfg.terminations.contact_tolerance)
+        self.contact_loss_frames = torch.where(need & ~kept, self.contact_loss_frames + 1, 0)
 
     def reference_at(self, k: int) -> ReferenceFrame:
         idx = torch.minimum(self.ref_index + k, self._clip_end()) if k else self.ref_index

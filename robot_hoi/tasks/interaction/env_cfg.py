@@ -44,6 +44,9 @@ class TerminationCfg:
     max_mean_object_point_error: float = 0.5  # m, object points deviate on average
     max_interaction_distance_error: float = 0.5  # m, weighted link-to-object distance vs the reference
     max_contact_loss_frames: int = 10       # required body-object contact lost for more than this many frames
+    # A required hand contact also counts as kept while a hand link (wrist or fingertip) is within this distance
+    # of the object surface: the retargeted hands rest ~1 cm off the hull, and a grip is a few mm of squeeze.
+    contact_tolerance: float = 0.02
 
 
 @dataclass
@@ -84,6 +87,10 @@ class InteractionEnvCfg:
     object_surface_points: int = 256        # samples for d_t
     self_collision: bool = False
     action_clip: float = 4.0
+    # PD target = offset + action_scale * action. "reference": offset = the retargeted reference joints of the frame
+    # being stepped to (the policy learns corrections; the runtime reads them from the motion sidecar);
+    # "default": offset = the default pose (InterMimic's absolute targets).
+    action_offset: str = "reference"
     rewards: dict[str, RewardTermCfg | None] = field(default_factory=_default_rewards)
     terminations: TerminationCfg = field(default_factory=TerminationCfg)
     init: InitCfg = field(default_factory=InitCfg)

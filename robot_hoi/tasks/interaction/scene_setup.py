@@ -35,6 +35,10 @@ class InteractionScene:
         self.finger_contact_ids = [i for i, n in enumerate(contact_names) if n[:2] in ("L_", "R_")]
         self.body_link_ids = [i for i, n in enumerate(self.layout.link_names)
                               if not any(m in n for m in HAND_LINK_MARKERS)]
+        # wrist + fingertip links of the left and right hand (for contact tolerance)
+        self.hand_link_ids = [[i for i, n in enumerate(self.layout.link_names)
+                               if n.startswith(prefix) or n == wrist]
+                              for prefix, wrist in (("L_", "left_wrist_yaw_link"), ("R_", "right_wrist_yaw_link"))]
 
     def _resolve_layout(self, contact_names: list[str]) -> SceneLayout:
         m = self.model
