@@ -27,6 +27,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--rate", type=float, default=None, help="loop rate in Hz (default 1/control_dt; dry runs only)")
     p.add_argument("--log-dir", default=None, help="where events.jsonl, ticks/ and summary.json go")
     p.add_argument("--auto-start", action="store_true", help="start the policy from HOLD without the operator")
+    p.add_argument("--spin-ms", type=float, default=1.0,
+                   help="busy-wait this long before each deadline for tight wake-ups (default 1.0; 0 = sleep only)")
+    p.add_argument("--rt-priority", type=int, default=None, metavar="N",
+                   help="run the loop thread SCHED_FIFO at priority N (1-99; needs root or CAP_SYS_NICE)")
     hands = p.add_argument_group("hands")
     hands.add_argument("--hand-bus", choices=("serial", "modbus", "can"), default="serial")
     hands.add_argument("--hand-port", nargs=2, metavar=("LEFT", "RIGHT"), default=None,
@@ -54,6 +58,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     safety.add_argument("--zero-torque-s", type=float, default=None, help="ZERO_TORQUE duration (default 0.5)")
     safety.add_argument("--ramp-s", type=float, default=None, help="RAMP_TO_DEFAULT duration (default 2.0)")
     safety.add_argument("--damp-s", type=float, default=None, help="DAMP duration before exit (default 1.0)")
+    safety.add_argument("--max-input-age-periods", type=float, default=None, metavar="N",
+                        help="body/hand/tracker data older than N control periods -> DAMP (default 2)")
 
 
 def register(subparsers) -> None:
@@ -73,7 +79,7 @@ def options_from_args(args: argparse.Namespace):
     from deploy.session import DeployOptions
 
     safety = SafetyConfig()
-    for name in ("zero_torque_s", "ramp_s", "damp_s"):
+    for name in ("zero_torque_s", "ramp_s", "damp_s", "max_input_age_periods"):
         value = getattr(args, name)
         if value is not None:
             setattr(safety, name, value)
@@ -84,7 +90,8 @@ def options_from_args(args: argparse.Namespace):
         hand_safe_state=args.hand_safe_state, hand_force_limit=args.hand_force_limit, hand_speed=args.hand_speed,
         body=args.body, dds_interface=args.dds_interface, dds_domain=args.dds_domain, tracker=args.tracker,
         tracker_host=args.tracker_host, tracker_port=args.tracker_port, duration=args.duration, rate=args.rate,
-        log_dir=args.log_dir, auto_start=args.auto_start, safety=safety,
+        log_dir=args.log_dir, auto_start=args.auto_start, spin_s=max(0.0, args.spin_ms) * 1e-3,
+        realtime_priority=args.rt_priority, safety=safety,
     )
 
 

@@ -15,7 +15,9 @@ A tick, in order:
 
 from __future__ import annotations
 
+import contextlib
 import math
+import os
 import sys
 import threading
 from dataclasses import dataclass
@@ -69,6 +71,7 @@ class Runtime:
         recorder: TickRecorder | None = None,
         rate_hz: float | None = None,
         gil_switch_interval_s: float | None = 2e-4,
+        realtime_priority: int | None = None,
     ):
         self.contract = contract
         self.policy = policy
@@ -85,6 +88,8 @@ class Runtime:
         # The hand I/O threads and simulated devices share the GIL with the loop; Python's default 5 ms switch
         # interval would let them delay a wake-up by milliseconds. run() shortens it while it runs.
         self.gil_switch_interval_s = gil_switch_interval_s
+        # SCHED_FIFO priority for the loop thread only (Linux; needs CAP_SYS_NICE). None: normal scheduling.
+        self.realtime_priority = realtime_priority
         self.num_body = contract.num_body
         self.needs_tracker = contract.uses_reference or contract.uses_object
         self.shaper = TargetShaper(contract, self.dt, self.safety.max_target_rate)
@@ -367,7 +372,8 @@ class Runtime:
         previous_interval = sys.getswitchinterval()
         if self.gil_switch_interval_s is not None:
             sys.setswitchinterval(self.gil_switch_interval_s)
-        self.events.log("start", rate_hz=1.0 / self.dt, policy=self.contract.source, duration_s=duration_s)
+        self.events.log("start", rate_hz=1.0 / self.dt, policy=self.contract.source, duration_s=duration_s,
+                        scheduling=self._set_realtime())
         try:
             while True:
                 wake = clock.now()
@@ -403,12 +409,31 @@ class Runtime:
             raise
         finally:
             sys.setswitchinterval(previous_interval)
+            self._restore_scheduling()
             end = clock.now()
             self.phase_time[self.phase.name] = self.phase_time.get(self.phase.name, 0.0) + (end - self.phase_since)
             self.phase_since = end
             self.events.log("stop", reason=self.exit_reason or self._stop_reason or "", ticks=self.ticks,
                             final_phase=self.phase.name)
         return self.summary()
+
+    def _set_realtime(self) -> str:
+        """Give the loop thread SCHED_FIFO if asked; threads started before keep their own scheduling."""
+        self.scheduling = "normal"
+        if self.realtime_priority is None:
+            return self.scheduling
+        try:
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(self.realtime_priority))
+        except (AttributeError, PermissionError, OSError) as exc:
+            self.events.log("warning", reason=f"real-time priority not available ({exc}); normal scheduling")
+            return "normal"
+        self.scheduling = f"SCHED_FIFO {self.realtime_priority}"
+        return self.scheduling
+
+    def _restore_scheduling(self) -> None:
+        if self.realtime_priority is not None:
+            with contextlib.suppress(AttributeError, PermissionError, OSError):
+                os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
 
     def summary(self) -> dict:
         def stats_ms(values, absolute=False, minus=0.0):
@@ -424,6 +449,7 @@ class Runtime:
             "final_phase": self.phase.name,
             "faults": list(self.fault_reasons),
             "rate_hz": 1.0 / self.dt,
+            "scheduling": getattr(self, "scheduling", "normal"),
             "ticks": self.ticks,
             "policy_steps": self.policy_steps,
             "phase_time_s": dict(self.phase_time),

@@ -59,6 +59,8 @@ class DeployOptions:
     rate: float | None = None
     log_dir: str | None = None
     auto_start: bool = False
+    spin_s: float = 0.001  # busy-wait the last stretch before each deadline (tight wake-ups; costs CPU)
+    realtime_priority: int | None = None  # SCHED_FIFO priority for the loop thread (needs CAP_SYS_NICE)
     safety: SafetyConfig = field(default_factory=SafetyConfig)
 
 
@@ -68,7 +70,7 @@ class Session(contextlib.ExitStack):
     def __init__(self, options: DeployOptions):
         super().__init__()
         self.options = options
-        self.clock = MonotonicClock()
+        self.clock = MonotonicClock(spin_s=options.spin_s)
         self.runtime: Runtime | None = None
         self.description: dict = {}
 
@@ -113,7 +115,7 @@ class Session(contextlib.ExitStack):
         operator = OperatorInput() if o.auto_start else KeyboardOperator()
         self.runtime = Runtime(contract, policy, ObservationBuilder(contract, motion), body, tracker, hands,
                                clock=self.clock, safety=safety, operator=operator, events=events,
-                               recorder=recorder, rate_hz=rate)
+                               recorder=recorder, rate_hz=rate, realtime_priority=o.realtime_priority)
         events.log("session", **self.description, log_dir=str(log_dir))
 
     def _motion(self, contract):
