@@ -121,7 +121,7 @@ class FrameParser:
             frames.append(found)
 
     def _candidate(self, start: int) -> tuple[str, int]:
-        """("ok"|"bad"|"short", frame size) for a header at `start`."""
+        """(verdict, frame size) for a header at `start`: ok, short (wait for more), bad_length, bad_checksum."""
         buf = self._buf
         if start + 4 > len(buf):
             return "short", 0

@@ -133,9 +133,11 @@ class ModbusHandBus(RegisterHandBus):
         timeout: float = DEFAULT_TIMEOUT_S,
         retries: int = 2,
         safe_pose="hold",
+        handle_local_echo: bool = False,
     ):
         self.port = port
         self.baudrate = int(baudrate)
+        self.handle_local_echo = bool(handle_local_echo)  # for RS485 adapters that echo what they send
         self._client: _RtuClient | None = None
         self._rx = b""
         super().__init__(
@@ -164,6 +166,7 @@ class ModbusHandBus(RegisterHandBus):
             stopbits=1,
             timeout=self.timeout,
             retries=0,  # retries are ours: logged, counted and classified
+            handle_local_echo=self.handle_local_echo,
             trace_packet=self._trace,
         )
         if not client.connect():

@@ -24,7 +24,8 @@ DEFAULT_TIMEOUT_S = 0.03  # longest reply (26 B) takes 2.3 ms at 115200 baud; th
 class SerialHandBus(RegisterHandBus):
     """One hand on an RS485 port (e.g. /dev/ttyUSB1), 8N1.
 
-    Every request is answered by exactly one reply frame; a try fails when no reply with our hand id, command,
+    Replies start with the reversed header `90 EB`, so an adapter that echoes our own `EB 90` request back is
+    harmless: the reply parser skips it. Every request is answered by exactly one reply frame; a try fails when no reply with our hand id, command,
     address and length arrives within `timeout` (a try can last up to about 2x `timeout` when bytes keep
     trickling in), when the checksum is wrong, or when the port errors (then the next try reopens it).
     """

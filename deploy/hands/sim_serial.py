@@ -34,9 +34,10 @@ MODBUS_MAX_READ = 125
 
 
 class _PtyHand(SimulatedHand):
-    def __init__(self, side: str, hand_id: int = 1, *, baudrate: int = 115200, **options):
+    def __init__(self, side: str, hand_id: int = 1, *, baudrate: int = 115200, echo: bool = False, **options):
         super().__init__(side, hand_id, **options)
         self.baudrate = int(baudrate)
+        self.echo = echo  # behave like an RS485 adapter that hears its own transmission
         self.link = PtyLink(f"{self.transport}-{side}-{hand_id}")
 
     @property
@@ -63,10 +64,12 @@ class _PtyHand(SimulatedHand):
     def wire_seconds(self, nbytes: int) -> float:
         return nbytes * BITS_PER_BYTE / self.baudrate
 
-    def _send(self, request_size: int, reply: bytes, arrival: float, avoid: bytes) -> None:
+    def _send(self, request: bytes, reply: bytes, arrival: float, avoid: bytes) -> None:
         out = self._apply_byte_fault(reply, self._take_fault(), avoid)
-        self.wire_bits += (request_size + len(out)) * BITS_PER_BYTE
-        self._wait_for_wire(arrival, self.wire_seconds(request_size + len(out)))
+        self.wire_bits += (len(request) + len(out)) * BITS_PER_BYTE
+        self._wait_for_wire(arrival, self.wire_seconds(len(request) + len(out)))
+        if self.echo:
+            out = request + out
         if out:
             self.link.write(out)
             self.replies_sent += 1
@@ -104,8 +107,7 @@ class SimulatedSerialHand(_PtyHand):
             reply = frames.encode_write_ack(frame.hand_id, frame.address, ok=accepted)
         else:
             return
-        request_size = len(frame.payload) + 3 + frames.OVERHEAD
-        self._send(request_size, reply, arrival, avoid=frames.REPLY_HEADER[:1])
+        self._send(frame.encode(), reply, arrival, avoid=frames.REPLY_HEADER[:1])
 
 
 class SimulatedModbusHand(_PtyHand):
@@ -162,8 +164,12 @@ class SimulatedModbusHand(_PtyHand):
             return  # broadcast: act, never answer
         response.dev_id = self.hand_id
         response.transaction_id = 0
-        request_size = len(self._framer.buildFrame(request))
-        self._send(request_size, self._framer.buildFrame(response), arrival, avoid=bytes([self.hand_id]))
+        self._send(
+            self._framer.buildFrame(request),
+            self._framer.buildFrame(response),
+            arrival,
+            avoid=bytes([self.hand_id]),
+        )
 
     def _execute(self, request: ModbusPDU) -> ModbusPDU:
         fc = request.function_code

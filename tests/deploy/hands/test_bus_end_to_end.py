@@ -73,7 +73,7 @@ def test_two_hands_on_distinct_ids_and_links(hand_rig, transport):
     if transport == "can":  # both hands on one CAN bus, told apart by id
         left_sim, left, _ = hand_rig("can", "left", hand_id=1)
         right_sim = start_simulated_hand("can", "right", hand_id=2, channel=left_sim.channel, pace=False)
-        right = make_hand_bus("can", "right", timeout=0.05, **right_sim.bus_kwargs())
+        right = make_hand_bus("can", "right", timeout=0.1, **right_sim.bus_kwargs())
         assert right_sim.channel == left_sim.channel
     else:
         left_sim, left, _ = hand_rig(transport, "left", hand_id=1)
@@ -94,6 +94,17 @@ def test_two_hands_on_distinct_ids_and_links(hand_rig, transport):
         if transport == "can":
             right.disconnect()
             right_sim.stop()
+
+
+@pytest.mark.parametrize("transport_name", ["serial", "modbus"])
+def test_rs485_adapter_echo(hand_rig, transport_name):
+    options = {"handle_local_echo": True} if transport_name == "modbus" else {}
+    sim, bus, clock = hand_rig(transport_name, echo=True, bus_options=options)
+    bus.connect()
+    bus.write_angles([250] * 6)
+    clock.advance(1.0)
+    assert bus.read_state().angles.tolist() == [250] * 6
+    assert bus.stats.retries == 0
 
 
 def test_clamps_before_anything_goes_on_the_wire(hand_rig, transport):
