@@ -37,6 +37,20 @@ class ReferenceFrame:
     joint_pos: Tensor
 
 
+@dataclass
+class StartPlan:
+    """What an optional `env.start_sampler.plan(env, env_ids)` decides for the envs being reset (n rows): the clip
+    of every row, and for the `custom` rows the full start: robot + object state (current_states() layout, object
+    angular velocity in world axes), reference frame and frames the reference clock is held (like the warm-up).
+    The other rows start as usual (stand or reference/PSI) on the given clip."""
+
+    clip: Tensor                 # (n,) long
+    custom: Tensor               # (n,) bool
+    state: Tensor | None = None  # (n, robot_nq + robot_nv + 13), read where custom
+    frame: Tensor | None = None  # (n,) long absolute reference frame, read where custom
+    hold: Tensor | None = None   # (n,) long, read where custom
+
+
 class InteractionEnv:
     """Implements robot_hoi.rl.env.VecEnv."""
 
@@ -50,6 +64,7 @@ class InteractionEnv:
         self.backend = scene.make_backend(cfg.num_envs, backend=cfg.backend, nthread=cfg.nthread)
         self.dt = self.backend.control_dt
         self.generator = torch.Generator().manual_seed(cfg.seed)
+        self.start_sampler = None  # optional: chooses reset clips/states (StartPlan); e.g. the student's samplers
         layout = scene.layout
         self.layout = layout
         self.num_actions = len(layout.actuator_names)
@@ -258,14 +273,22 @@ class InteractionEnv:
     def _reset_envs(self, env_ids: Tensor) -> None:
         n = env_ids.numel()
         init = self.cfg.init
-        clip = torch.randint(len(self.references), (n,), generator=self.generator)
-        stand = torch.rand(n, generator=self.generator) < init.stand_start_probability
+        plan = self.start_sampler.plan(self, env_ids) if self.start_sampler is not None else None
+        clip = plan.clip.clone() if plan is not None else \
+            torch.randint(len(self.references), (n,), generator=self.generator)
+        custom = plan.custom if plan is not None else torch.zeros(n, dtype=torch.bool)
+        stand = (torch.rand(n, generator=self.generator) < init.stand_start_probability) & ~custom
         frame = self.clip_start[clip].clone()
         robot_state = torch.zeros(n, self.layout.robot_nq + self.layout.robot_nv)
         object_state = torch.zeros(n, 13)
+        custom_ids = custom.nonzero().flatten()
+        if custom_ids.numel():
+            robot_state[custom_ids] = plan.state[custom_ids, : robot_state.shape[1]]
+            object_state[custom_ids] = plan.state[custom_ids, robot_state.shape[1]:]
+            frame[custom_ids] = plan.frame[custom_ids]
 
         # reference/physical state initialisation for the others
-        others = (~stand).nonzero().flatten()
+        others = (~stand & ~custom).nonzero().flatten()
         if others.numel():
             states, frames = self.psi.sample(others.numel()) if self.psi.ready() else (None, None)
             if states is None:
@@ -287,6 +310,8 @@ class InteractionEnv:
         self.clip_id[env_ids] = clip
         self.ref_index[env_ids] = frame
         self.warmup_left[env_ids] = torch.where(stand, self.cfg.warmup_frames, 0)
+        if custom_ids.numel():
+            self.warmup_left[env_ids[custom_ids]] = plan.hold[custom_ids]
         self.episode_length[env_ids] = 0
         self.contact_loss_frames[env_ids] = 0
         self.last_actions[env_ids] = 0.0
