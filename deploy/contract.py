@@ -425,6 +425,9 @@ def _parse_obs_spec(value, dims: _Dims, fail) -> tuple[ObsTermSpec, ...]:
         if not isinstance(term, dict) or not isinstance(term.get("name"), str) or "size" not in term:
             raise fail("obs_spec", f"entry {i} must be {{'name': str, 'size': int}}")
         name, size = term["name"], term["size"]
+        if name not in OBS_TERMS and name.startswith("teacher."):
+            raise fail("obs_spec", f"entry {i} is the privileged simulation term '{name}': a teacher policy cannot "
+                                   "run on the robot (deploy a distilled student)")
         if name not in OBS_TERMS:
             raise fail("obs_spec", f"entry {i} names unknown observation term '{name}' (known: {', '.join(OBS_TERMS)})")
         if not isinstance(size, int) or isinstance(size, bool):

@@ -109,6 +109,7 @@ class Runtime:
         self.exit_reason = ""
         self.fault_reasons: list[str] = []
         self.body_send_errors = 0
+        self._send_fault: str | None = None
         self.policy_steps = 0
         self.ticks = 0
         self.overruns = 0
@@ -189,6 +190,9 @@ class Runtime:
         elif self.phase in COMMANDING_PHASES:
             faults = input_faults(now, self.dt, self.safety, self.contract, body, reading, poses,
                                   need_tracker=self.phase == Phase.POLICY and self.needs_tracker)
+            if self._send_fault:
+                faults.append(self._send_fault)
+                self._send_fault = None
             if faults:
                 self._fault(faults, now)
             elif self._estop_reason or self._stop_reason:
@@ -319,6 +323,7 @@ class Runtime:
         except BodyLinkError as exc:
             self.body_send_errors += 1
             self.events.log("error", tick=self.ticks, reason=f"body send failed: {exc}")
+            self._send_fault = f"body send failed: {exc}"  # acted on (DAMP) at the next tick
 
     def _log_shaping(self) -> None:
         names = self.contract.actuator_names

@@ -85,6 +85,8 @@ MALFORMED = [
     ("zero control_dt", "control_dt", lambda v: 0.0, "control_dt"),
     ("negative keyframe", "keyframes", lambda v: [-1, 16], "keyframes"),
     ("unknown term", "obs_spec", lambda v: v + [{"name": "joint_torque", "size": 0}], "unknown observation term 'joint_torque'"),
+    ("teacher term", "obs_spec", lambda v: [{"name": "teacher.body_pos", "size": 3}] + v,
+     "a teacher policy cannot run on the robot"),
     ("wrong term size", "obs_spec", lambda v: [{"name": "joint_pos", "size": 40}] + v[1:], "term 'joint_pos' has size 40"),
     ("duplicate term", "obs_spec", lambda v: v + v[:1], "twice"),
     ("hand channel order", "hands", lambda v: {"left": v["left"][::-1], "right": v["right"]}, "Inspire register order"),

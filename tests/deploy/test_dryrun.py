@@ -98,3 +98,37 @@ def test_cli_errors_are_one_line(dev_policy, tmp_path, capsys, argv, expected):
     err = capsys.readouterr().err
     assert code == 2
     assert expected in err and err.count("\n") == 1 and "Traceback" not in err
+
+
+def test_sigint_damps_then_exits_cleanly(dev_policy, tmp_path):
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    from .conftest import REPO
+
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "deploy", "--dry-run", "--policy", str(dev_policy), "--duration", "60",
+         "--log-dir", str(tmp_path), "--hand-bus", "can", *FAST],
+        cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 30
+        events = tmp_path / "events.jsonl"
+        while time.monotonic() < deadline:
+            if events.is_file() and '"to": "POLICY"' in events.read_text():
+                break
+            time.sleep(0.05)
+        else:
+            raise AssertionError("the dry run never reached POLICY")
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=20)
+    finally:
+        proc.kill()
+    assert proc.returncode == 0, err
+    assert "Traceback" not in err
+    damp = [e for e in load_events(tmp_path) if e["event"] == "phase" and e["to"] == "DAMP"]
+    assert damp and damp[0]["reason"] == "SIGINT"
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["exit_reason"].startswith("SIGINT") and summary["faults"] == []
+    assert "SIGINT" in out

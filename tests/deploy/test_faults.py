@@ -217,3 +217,24 @@ def test_tracker_loss_before_start_blocks_the_start(dev_policy):
     rig.tracker.restore("object")
     rig.step(2)
     assert rig.runtime.phase == Phase.POLICY
+
+
+def test_body_send_failure_damps_at_the_next_tick(dev_policy):
+    rig = policy_rig(dev_policy)
+    real_send = rig.body.send
+    failures = {"n": 1}
+
+    def flaky_send(*args):
+        if failures["n"] > 0:
+            failures["n"] -= 1
+            from deploy.errors import BodyLinkError
+
+            raise BodyLinkError("DDS write failed")
+        return real_send(*args)
+
+    rig.body.send = flaky_send
+    rig.step()
+    phase, command = tick_once(rig)
+    assert_damped(rig, command)
+    assert rig.runtime.fault_reasons == ["body send failed: DDS write failed"]
+    assert rig.runtime.body_send_errors == 1
