@@ -172,7 +172,8 @@ class PolicyContract:
 
     @property
     def uses_object(self) -> bool:
-        return any(t.name in OBJECT_TERMS or t.name.startswith("ref_object") for t in self.obs_spec)
+        """Whether the policy observes the tracked object (ref_object_* come from the motion, not the tracker)."""
+        return any(t.name in OBJECT_TERMS for t in self.obs_spec)
 
     def hand_slice(self, side: str) -> slice:
         """Actuator indices of one hand's 6 channel joints (left, then right, after the body)."""

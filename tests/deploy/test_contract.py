@@ -206,3 +206,12 @@ def test_embodiment_mismatch_is_refused(contract, tmp_path, edit, expected):
 def test_embodiment_match_with_copied_yaml(contract, tmp_path):
     shutil.copy(EMBODIMENT_YAML, tmp_path / "copy.yaml")
     check_against_embodiment(contract, tmp_path / "copy.yaml")
+
+
+def test_which_inputs_a_policy_needs():
+    emb = load_embodiment(EMBODIMENT_YAML)
+    proprio = make_contract(emb, obs_terms=["projected_gravity", "joint_pos", "last_action"])
+    assert not proprio.uses_reference and not proprio.uses_object
+    ref_only = make_contract(emb, obs_terms=["joint_pos", "ref_object_pos"])
+    assert ref_only.uses_reference and not ref_only.uses_object  # the reference object comes from the motion
+    assert make_contract(emb, obs_terms=["object_rot"]).uses_object
