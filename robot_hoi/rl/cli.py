@@ -33,6 +33,9 @@ def register(subparsers) -> None:
                    help="override, e.g. --set env.num_envs=128 --set ppo.actor_lr=1e-4 (repeatable)")
     p.add_argument("--resume", action="store_true", help="continue each group from its latest checkpoint")
     p.add_argument("--device", default="cpu")
+    p.add_argument("--torch-threads", type=int, default=1,
+                   help="torch CPU threads (default 1: the physics pool owns the cores; small-batch ops lose "
+                        "more to thread hand-offs than they gain)")
     p.set_defaults(func=run)
 
 
@@ -52,6 +55,7 @@ def run(args: argparse.Namespace) -> int:
     from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg
     from robot_hoi.utils.config import load_yaml_dataclass
 
+    torch.set_num_threads(max(args.torch_threads, 1))
     env_overrides = [o[len("env."):] for o in args.overrides if o.startswith("env.")]
     train_overrides = [o for o in args.overrides if not o.startswith("env.")]
     embodiment = load_embodiment(args.embodiment)
