@@ -56,6 +56,7 @@ class CanHandBus(RegisterHandBus):
         self.pipeline = bool(pipeline)
         self.bus_options = dict(bus_options or {})
         self.error_frames = 0  # CAN error frames seen on the bus while waiting for replies
+        self._read_plans: dict[tuple[str, ...], list] = {}
         self._bus: can.BusABC | None = None
         super().__init__(
             side,
@@ -102,10 +103,13 @@ class CanHandBus(RegisterHandBus):
         return self._read_blocks([regs])[0]
 
     def _read_blocks(self, regs_per_block: list[tuple[Register, ...]]) -> list[list[np.ndarray]]:
-        plan = [
-            [(reg, self._pending(RW_READ, reg, lambda a, n: bytes([n]))) for reg in regs]
-            for regs in regs_per_block
-        ]
+        key = tuple(reg.name for regs in regs_per_block for reg in regs)
+        if key not in self._read_plans:  # read requests never change: build them once per register set
+            self._read_plans[key] = [
+                [(reg, self._pending(RW_READ, reg, lambda a, n: bytes([n]))) for reg in regs]
+                for regs in regs_per_block
+            ]
+        plan = self._read_plans[key]
         replies = self._exchange([p for block in plan for _, pend in block for p in pend])
         return [
             [tables.decode_values(reg, b"".join(replies[p] for p in pend)) for reg, pend in block]
@@ -142,7 +146,7 @@ class CanHandBus(RegisterHandBus):
             groups = [pending] if self.pipeline else [[p] for p in pending]
             for group in groups:
                 for p in group:
-                    bus.send(p.message(), timeout=self.timeout)
+                    bus.send(p.message, timeout=self.timeout)
                 self._collect(bus, {p.arbitration_id: p for p in group}, got, seen, deadline)
         except can.CanError as exc:
             raise AttemptFailed("disconnected", f"{type(exc).__name__}: {exc}") from exc

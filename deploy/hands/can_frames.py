@@ -15,6 +15,7 @@ groups. `chunk_bytes=2` gives the per-register reads/writes the CAN analysis' dr
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import can
 
@@ -80,7 +81,7 @@ class Pending:
     data: bytes  # request payload (read: one byte = length wanted)
     register: str = ""  # register group name, for messages
 
-    @property
+    @cached_property
     def arbitration_id(self) -> int:
         return make_id(self.rw, self.address, self.hand_id)
 
@@ -89,7 +90,9 @@ class Pending:
         """Exact data length of a good reply (None for a write ack: 0 or 1 byte)."""
         return self.data[0] if self.rw == RW_READ else None
 
+    @cached_property
     def message(self) -> can.Message:
+        """The request frame (built once; python-can interfaces do not modify what they send)."""
         return can.Message(arbitration_id=self.arbitration_id, is_extended_id=True, data=self.data)
 
 

@@ -33,7 +33,7 @@ def test_identifier_examples_from_the_notes():
 
 
 def test_write_of_angle_set_3_matches_the_notes_data():
-    msg = Pending(RW_WRITE, 1492, 1, (600).to_bytes(2, "little")).message()
+    msg = Pending(RW_WRITE, 1492, 1, (600).to_bytes(2, "little")).message
     assert (
         msg.arbitration_id == 0x05750001 and msg.is_extended_id and bytes(msg.data) == bytes.fromhex("58 02")
     )
@@ -70,7 +70,7 @@ def test_reply_classification():
 
 
 def test_device_side_request_parsing():
-    req = Pending(RW_READ, 1546, 7, b"\x08").message()
+    req = Pending(RW_READ, 1546, 7, b"\x08").message
     assert parse_request(req, 7) == (RW_READ, 1546, b"\x08")
     assert parse_request(req, 8) is None  # another hand
     bad_len = can.Message(arbitration_id=make_id(RW_READ, 1546, 7), data=b"\x09")
