@@ -6,6 +6,8 @@ The probes are one request and one reply on every transport (on CAN too: TEMP is
 
 from __future__ import annotations
 
+import logging
+
 import pytest
 
 from deploy.errors import HandFaultError, HandLinkError
@@ -35,11 +37,13 @@ def test_silence_raises_link_error_after_exactly_the_configured_tries(hand_rig, 
     assert probe_read(bus).tolist() == [32] * 6  # the next call works again
 
 
-def test_one_lost_reply_is_absorbed_by_a_retry(hand_rig, transport):
+def test_one_lost_reply_is_absorbed_by_a_retry(hand_rig, transport, caplog):
     sim, bus, _ = hand_rig(transport)
     bus.connect()
     sim.drop_next(1)
-    bus.clear_errors()
+    with caplog.at_level(logging.DEBUG, logger="deploy.hands"):
+        bus.clear_errors()
+    assert any("write CLEAR_ERROR, try 1/3 failed: timeout" in r.getMessage() for r in caplog.records)
     assert bus.stats.retries == 1 and bus.stats.failures["timeout"] == 1 and bus.stats.link_errors == 0
     assert sim.requests[("write", "CLEAR_ERROR")] == 2
 
