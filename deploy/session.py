@@ -19,7 +19,7 @@ from deploy._atomic import atomic_write_text
 from deploy.clock import MonotonicClock
 from deploy.contract import check_against_embodiment
 from deploy.embodiment import resolve_embodiment_path
-from deploy.errors import DeployError
+from deploy.errors import BodyLinkError, DeployError, HandFaultError, HandLinkError
 from deploy.hand_pair import Hands
 from deploy.loop import Runtime
 from deploy.motion import load_motion
@@ -164,7 +164,10 @@ class Session(contextlib.ExitStack):
             body = UnitreeDdsBody(contract.num_body, domain_id=o.dds_domain, interface=interface, clock=self.clock)
         else:
             raise DeployError(f"--body must be 'sim' or 'dds', got {kind!r}")
-        body.connect()
+        try:
+            body.connect()
+        except BodyLinkError as exc:
+            raise DeployError(f"the body did not come up: {exc}") from exc
         self.callback(body.close)
         return body
 
@@ -233,7 +236,10 @@ class Session(contextlib.ExitStack):
                       force_limits=[o.hand_force_limit] * 6, speeds=[o.hand_speed] * 6,
                       safe_state=o.hand_safe_state, threaded=o.hand_threads)
         self.callback(hands.close)  # registered before connect: a half-connected pair is still closed
-        hands.connect()
+        try:
+            hands.connect()
+        except (HandLinkError, HandFaultError) as exc:  # cable, power, port, id: the operator can fix these
+            raise DeployError(f"the hands did not come up: {exc}") from exc
         return hands
 
     # ---------------------------------------------------------------- running

@@ -13,7 +13,8 @@ from deploy.runlog import load_events, load_ticks
 from deploy.safety import Phase
 
 # Staleness is tested on the fake clock; a generous limit keeps these real-time runs stable on a busy machine.
-FAST = ["--zero-torque-s", "0.1", "--ramp-s", "0.3", "--damp-s", "0.2", "--auto-start", "--max-input-age-periods", "6"]
+FAST = ["--zero-torque-s", "0.1", "--ramp-s", "0.3", "--damp-s", "0.2", "--auto-start", "--max-input-age-periods", "6",
+        "--hand-timeout", "0.1"]
 
 
 def check_run(log_dir, contract: PolicyContract, min_policy_steps: int):
@@ -85,6 +86,8 @@ def test_hands_bench_uses_the_given_ports(dev_policy, tmp_path):
     (["--policy", "{policy}", "--dry-run", "--embodiment", "{yaml}"], "does not match"),
     (["--policy", "{policy}", "--dry-run", "--hand-port", "/dev/does-not-exist-a", "/dev/does-not-exist-b"],
      "cannot open"),
+    (["--policy", "{policy}", "--dry-run", "--hand-bus", "can", "--can-channel", "nobody-here",
+      "--can-interface", "virtual", "--hand-timeout", "0.01"], "the hands did not come up"),
 ])
 def test_cli_errors_are_one_line(dev_policy, tmp_path, capsys, argv, expected):
     from robot_hoi.cli import main

@@ -20,7 +20,7 @@ from deploy.safety import Phase, SafetyConfig
 from deploy.tracking import SimulatedTracker
 
 RATE_HZ = 50.0
-BUS_TIMEOUT_S = 0.02
+BUS_TIMEOUT_S = 0.05  # generous: a loaded CI machine must not turn scheduling delays into faults
 
 
 class RealTimeRig:
@@ -135,8 +135,8 @@ def test_persistent_byte_faults_reach_damp(dev_policy, transport, fault):
         getattr(rig.sims[1], fault)(10_000)
         rig.run(0.5)
         assert rig.damp_seen_at is not None, rig.runtime.fault_reasons
-        # bus: 3 tries + a reconnect (3 more tries) = 0.12 s, then one period to act on it; slack for a busy CI box
-        assert rig.damp_seen_at - injected_at < 0.5
+        # bus: 3 tries + a reconnect (3 more tries) = 0.3 s, then one period to act on it; slack for a busy CI box
+        assert rig.damp_seen_at - injected_at < 0.6
         # the link-lost report, or (when the machine is slow) the staleness check, whichever fires first
         assert any(r.startswith("right hand") for r in rig.runtime.fault_reasons), rig.runtime.fault_reasons
         assert np.array_equal(rig.sims[1].model.commanded_angles, held)  # the hand keeps its last pose
