@@ -137,7 +137,8 @@ def teacher_observation(env) -> Tensor:
 
 def critic_extras(env) -> Tensor:
     """Privileged extras for the critic: clip phase and contact forces."""
-    phase = (env.ref_index.float() / max(env.reference.num_frames - 1, 1))[:, None]
+    start = env.clip_start[env.clip_id]
+    phase = ((env.ref_index - start).float() / (env.clip_end[env.clip_id] - start).clamp(min=1).float())[:, None]
     return torch.cat([phase, 0.01 * _flat(env.contact_force)], dim=-1)
 
 
