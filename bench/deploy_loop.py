@@ -24,10 +24,12 @@ from deploy.safety import SafetyConfig  # noqa: E402
 from deploy.session import DeployOptions, Session  # noqa: E402
 
 
-def run_once(policy: Path, transport: str, rate: float, duration: float, log_dir: Path, rt: int | None) -> dict:
-    safety = SafetyConfig(zero_torque_s=0.2, ramp_s=0.5, auto_start_after_s=0.2, damp_s=0.3)
-    options = DeployOptions(policy=str(policy), dry_run=True, hand_bus=transport, rate=rate, duration=duration,
-                            log_dir=str(log_dir), auto_start=True, safety=safety, realtime_priority=rt)
+def run_once(policy: Path, transport: str, rate: float, log_dir: Path, args) -> dict:
+    safety = SafetyConfig(zero_torque_s=0.2, ramp_s=0.5, auto_start_after_s=0.2, damp_s=0.3,
+                          max_input_age_periods=args.max_input_age_periods)
+    options = DeployOptions(policy=str(policy), dry_run=True, hand_bus=transport, rate=rate, duration=args.duration,
+                            log_dir=str(log_dir), auto_start=True, safety=safety, realtime_priority=args.rt_priority,
+                            hand_timeout=args.hand_timeout)
     with Session(options) as session:
         return session.run()
 
@@ -39,18 +41,23 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--transports", nargs="+", default=["serial", "modbus", "can"])
     parser.add_argument("--rt-priority", type=int, default=None, metavar="N",
                         help="SCHED_FIFO priority for the loop thread, as on the robot (needs root/CAP_SYS_NICE)")
+    parser.add_argument("--max-input-age-periods", type=float, default=2.0,
+                        help="staleness limit (the runtime's default 2); raise it when a busy machine starves the "
+                             "simulated hands and ends runs early")
+    parser.add_argument("--hand-timeout", type=float, default=None, help="bus timeout per try (default per transport)")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.ERROR)
     worst = 0.0
     with tempfile.TemporaryDirectory() as tmp:
         policy = build_dev_policy(Path(tmp) / "dev.onnx")
-        print(f"cpu count {os.cpu_count()}, {args.duration:.0f} s per run")
+        load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
+        print(f"cpu count {os.cpu_count()}, load average {load:.2f}, {args.duration:.0f} s per run, "
+              f"staleness limit {args.max_input_age_periods:g} periods")
         print(f"{'transport':<9} {'rate':>5} {'ticks':>6} {'p50 ms':>8} {'p99 ms':>8} {'max ms':>8} "
               f"{'overruns':>8} {'compute p99':>11} {'faults':>6}  scheduling")
         for transport in args.transports:
             for rate in args.rates:
-                s = run_once(policy, transport, rate, args.duration, Path(tmp) / f"{transport}-{rate:g}",
-                             args.rt_priority)
+                s = run_once(policy, transport, rate, Path(tmp) / f"{transport}-{rate:g}", args)
                 err = s["period_error_ms"]
                 worst = max(worst, err["p99"])
                 print(f"{transport:<9} {rate:>5.0f} {s['ticks']:>6} {err['p50']:>8.3f} {err['p99']:>8.3f} "

@@ -32,29 +32,6 @@ def quat_wxyz_to_matrix(quat_wxyz: np.ndarray) -> np.ndarray:
     return m
 
 
-def matrix_to_quat_wxyz(matrix: np.ndarray) -> np.ndarray:
-    """Unit quaternion wxyz (w >= 0) of a rotation matrix, numerically safe branch per element."""
-    m = np.asarray(matrix, dtype=np.float64)
-    flat = m.reshape(-1, 3, 3)
-    out = np.empty((flat.shape[0], 4))
-    for i, r in enumerate(flat):
-        trace = r[0, 0] + r[1, 1] + r[2, 2]
-        if trace > 0:
-            s = 2.0 * np.sqrt(trace + 1.0)
-            out[i] = [0.25 * s, (r[2, 1] - r[1, 2]) / s, (r[0, 2] - r[2, 0]) / s, (r[1, 0] - r[0, 1]) / s]
-        elif r[0, 0] > r[1, 1] and r[0, 0] > r[2, 2]:
-            s = 2.0 * np.sqrt(1.0 + r[0, 0] - r[1, 1] - r[2, 2])
-            out[i] = [(r[2, 1] - r[1, 2]) / s, 0.25 * s, (r[0, 1] + r[1, 0]) / s, (r[0, 2] + r[2, 0]) / s]
-        elif r[1, 1] > r[2, 2]:
-            s = 2.0 * np.sqrt(1.0 + r[1, 1] - r[0, 0] - r[2, 2])
-            out[i] = [(r[0, 2] - r[2, 0]) / s, (r[0, 1] + r[1, 0]) / s, 0.25 * s, (r[1, 2] + r[2, 1]) / s]
-        else:
-            s = 2.0 * np.sqrt(1.0 + r[2, 2] - r[0, 0] - r[1, 1])
-            out[i] = [(r[1, 0] - r[0, 1]) / s, (r[0, 2] + r[2, 0]) / s, (r[1, 2] + r[2, 1]) / s, 0.25 * s]
-    out *= np.where(out[:, :1] < 0, -1.0, 1.0)
-    return normalize_quat_wxyz(out).reshape(m.shape[:-2] + (4,))
-
-
 def quat_wxyz_multiply(a_wxyz: np.ndarray, b_wxyz: np.ndarray) -> np.ndarray:
     """Hamilton product a * b (apply b first, then a)."""
     a = np.asarray(a_wxyz, dtype=np.float64)
