@@ -135,3 +135,14 @@ def test_sigint_damps_then_exits_cleanly(dev_policy, tmp_path):
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert summary["exit_reason"].startswith("SIGINT") and summary["faults"] == []
     assert "SIGINT" in out
+
+
+def test_real_run_without_cyclonedds_says_how_to_install(dev_policy, tmp_path, capsys, monkeypatch):
+    import deploy.body.unitree_dds as dds
+    from robot_hoi.cli import main
+
+    monkeypatch.setattr(dds, "cyclonedds_available", lambda: False)
+    code = main(["deploy", "--policy", str(dev_policy), "--hand-port", "/dev/a", "/dev/b",
+                 "--log-dir", str(tmp_path)])
+    err = capsys.readouterr().err
+    assert code == 2 and "pip install 'cyclonedds==11.0.1'" in err and err.count("\n") == 1
