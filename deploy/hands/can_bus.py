@@ -71,9 +71,14 @@ class CanHandBus(RegisterHandBus):
         return f"CAN {self.interface}:{self.channel} @ {self.bitrate / 1e6:g} Mbit/s"
 
     def _open(self) -> None:
+        options = dict(self.bus_options)
+        if self.interface == "socketcan":  # kernel filter: only our hand's frames reach this socket
+            options.setdefault(
+                "can_filters", [{"can_id": self.hand_id, "can_mask": MAX_HAND_ID, "extended": True}]
+            )
         try:
             self._bus = can.Bus(
-                interface=self.interface, channel=self.channel, bitrate=self.bitrate, **self.bus_options
+                interface=self.interface, channel=self.channel, bitrate=self.bitrate, **options
             )
         except OPEN_ERRORS as exc:
             self._bus = None
