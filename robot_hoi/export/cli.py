@@ -23,6 +23,7 @@ def register(subparsers) -> None:
     o.add_argument("--data", nargs="*", default=None, help="with --untrained: the clip to track")
     o.add_argument("--embodiment", default="g1_inspire", help="with --untrained")
     o.add_argument("--seed", type=int, default=0, help="with --untrained")
+    o.add_argument("--clip", default=None, help="student: the clip whose reference goes in the motion sidecar")
     o.set_defaults(func=run_onnx)
     c = sub.add_parser("check", help="check an ONNX policy file against the deploy contract")
     c.add_argument("file")
@@ -58,6 +59,12 @@ def run_onnx(args: argparse.Namespace) -> int:
     ckpt = Path(args.checkpoint) if args.checkpoint else newest_checkpoint()
     if not ckpt.is_file():
         raise UserError(f"{ckpt}: no such checkpoint")
+    from robot_hoi.student.checkpoint import is_student_checkpoint
+
+    if is_student_checkpoint(ckpt):
+        from robot_hoi.student.export import run_student_export
+
+        return run_student_export(args, ckpt)
     model, train_cfg, _ = load_policy(ckpt)
     task = factory.read_task(ckpt)
     embodiment = load_embodiment(task["embodiment"])

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
 from robot_hoi.paths import CONFIGS_DIR, REPO_ROOT
@@ -36,13 +35,17 @@ def register(subparsers) -> None:
     p.add_argument("--torch-threads", type=int, default=1,
                    help="torch CPU threads (default 1: the physics pool owns the cores; small-batch ops lose "
                         "more to thread hand-offs than they gain)")
+    p.add_argument("--teachers", default=None, help="student: the teacher run folder (the --out of `robot-hoi train`)")
+    p.add_argument("--option", dest="options", action="append", default=[],
+                   help="student: a configs/train/student_options preset, e.g. complexmimic, skillmimic_v2 (repeatable)")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     if args.stage == "student":
-        print("robot-hoi train student: not built yet in this version of robot-hoi.", file=sys.stderr)
-        return 3
+        from robot_hoi.student.pipeline import run as train_student
+
+        return train_student(args)
     import time
 
     import torch

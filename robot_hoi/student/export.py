@@ -1,0 +1,70 @@
+"""Student checkpoint -> ONNX with the deploy contract (policy_kind "student") and the motion sidecar.
+
+The student reads only the deployable observation, so its file is what the robot runs. The sidecar is the
+reference the student tracked in training for the chosen clip (the teacher's rollout with reference
+distillation), verified like every export: onnx.checker, ORT vs torch on random and recorded observations.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from robot_hoi.errors import UserError
+from robot_hoi.paths import POLICIES_DIR
+
+
+def run_student_export(args: argparse.Namespace, ckpt: Path) -> int:
+    from deploy.motion import file_sha256
+    from robot_hoi.embodiment import build_model, load_embodiment
+    from robot_hoi.export.cli import offset_mode, record_observations
+    from robot_hoi.export.metadata import clip_identity, policy_metadata
+    from robot_hoi.export.motion_sidecar import deploy_motion
+    from robot_hoi.export.onnx_export import export_policy
+    from robot_hoi.student.checkpoint import load_student
+    from robot_hoi.student.task import read_student_task, task_folder
+    from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg
+    from robot_hoi.tasks.interaction.mdp.observations import student_observation_spec
+    from robot_hoi.utils.config import load_dataclass
+
+    model, cfg, data = load_student(ckpt)
+    if model.layout.obs_dim != data["dims"]["actor_obs"] or cfg.runner.actor_obs_groups != ["student"]:
+        raise UserError(f"{ckpt}: this student also reads {cfg.runner.actor_obs_groups[1:]} (e.g. the SkillMimic-V2 "
+                        "history embedding), which the deploy contract does not carry; train it with "
+                        "--set skillmimic.history=false to export it")
+    task = read_student_task(ckpt)
+    folder = task_folder(ckpt)
+    env_cfg = load_dataclass(InteractionEnvCfg, task["env"], f"{folder}/task.json")
+    env_cfg.num_envs = 16
+    env_cfg.psi.enabled = False
+    from robot_hoi.student.task import build_task_env
+
+    env, clips, sources = build_task_env(task, folder, env_cfg)
+    spec = student_observation_spec(env)
+    if env.obs_dims["student"] != model.num_actor_obs or spec != data["student"].get("obs_spec", spec):
+        raise UserError(f"{ckpt}: the student expects {model.num_actor_obs} observations, its task now gives "
+                        f"{env.obs_dims['student']}; the observation code changed since training")
+    names = [c.name for c in clips]
+    index = 0
+    if getattr(args, "clip", None):
+        if args.clip not in names:
+            raise UserError(f"--clip {args.clip!r}: the student trained on {names}")
+        index = names.index(args.clip)
+    recorded = record_observations(env, lambda o: model.act_inference(o["student"]), "student", args.recorded)
+
+    out = Path(args.output) if args.output else POLICIES_DIR / f"{folder.parent.name}-student.onnx"
+    motion_file = out.with_name(out.stem + ".motion.npz")
+    deploy_motion(env.references[index], source=str(motion_file)).save(motion_file)
+    embodiment = load_embodiment(task["embodiment"])
+    metadata = policy_metadata(
+        embodiment, build_model(embodiment), policy_kind="student", obs_spec=spec,
+        keyframes=env_cfg.student_keyframes, action_clip=env_cfg.action_clip,
+        clips=[clip_identity(clips[index], sources[index])],
+        reference={"file": motion_file.name, "sha256": file_sha256(motion_file)},
+        action_offset_mode=offset_mode(env_cfg), warmup_frames=env_cfg.warmup_frames,
+    )
+    report = export_policy(model.exported_policy(), model.num_actor_obs, metadata, out, recorded_obs=recorded)
+    for line in report.lines():
+        print(line)
+    print(f"wrote {motion_file} (reference of {names[index]}, {env.references[index].num_frames} frames)")
+    return 0

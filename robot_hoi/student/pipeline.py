@@ -1,0 +1,252 @@
+"""`robot-hoi train student`: teachers -> (options) -> distilled references -> student env -> Alg. 1 -> evaluation.
+
+Run folder OUT/: student/ (checkpoints, task.json, TensorBoard, scalars.jsonl, eval.json), references/ (distilled
+references, reused on --resume), and with ComplexMimic experts/<group>/{imitation,interaction}/ and routing.json.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import torch
+
+from robot_hoi.errors import UserError
+from robot_hoi.paths import REPO_ROOT
+from robot_hoi.rl.budget import Budget, parse_budget
+from robot_hoi.student.config import PRESETS, StudentTrainConfig, load_student_config
+from robot_hoi.student.reference_view import ReferenceTimeline, ReferenceView
+from robot_hoi.student.task import (
+    STUDENT_GROUP,
+    check_single_object,
+    evaluation_cfg,
+    make_scene,
+    mocap_reference,
+    student_env_cfg,
+    write_student_task,
+)
+from robot_hoi.student.teachers import CompositeTeacher, TeacherMember, TeacherRun, load_teacher_runs
+from robot_hoi.tasks.interaction import factory
+from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg
+from robot_hoi.utils.atomic import atomic_write_text
+from robot_hoi.utils.config import apply_overrides, load_dataclass
+
+
+@dataclass
+class Setup:
+    """Everything the student run is assembled from (filled step by step)."""
+
+    cfg: StudentTrainConfig
+    env_cfg: InteractionEnvCfg  # the student env's config
+    teacher_env_cfg: InteractionEnvCfg  # the teachers' (shared) env config
+    embodiment: object
+    runs: list[TeacherRun]
+    sources: list[str]
+    clips: list
+    mocap: list  # MoCap ReferenceMotion per clip
+    scene: object
+    out: Path
+    device: str = "cpu"
+    members: list[TeacherMember] = field(default_factory=list)
+    clip_teacher: list[int] = field(default_factory=list)
+    task_extra: dict = field(default_factory=dict)
+
+
+def scale_budget(budget: Budget, fraction: float) -> Budget:
+    def part(v):
+        return None if v is None else type(v)(max(v * fraction, 1))
+
+    return replace(budget, wall_seconds=part(budget.wall_seconds), samples=part(budget.samples),
+                   iterations=part(budget.iterations))
+
+
+def prepare(args: argparse.Namespace) -> Setup:
+    from robot_hoi.embodiment import load_embodiment
+
+    if not getattr(args, "teachers", None):
+        raise UserError("robot-hoi train student needs --teachers RUN_DIR (the output folder of `robot-hoi train`)")
+    config_path = args.config or PRESETS[args.preset]
+    cfg, env_overrides = load_student_config(config_path, getattr(args, "options", []), args.overrides)
+    runs = load_teacher_runs(args.teachers)
+    teacher_env_cfg = load_dataclass(InteractionEnvCfg, runs[0].env, f"{runs[0].checkpoint.parent}/task.json")
+    teacher_env_cfg = apply_overrides(teacher_env_cfg, [o for o in env_overrides if o.startswith("num_envs=")
+                                                        or o.startswith("nthread=")], "--set env.*")
+    env_cfg = student_env_cfg(apply_overrides(load_dataclass(InteractionEnvCfg, runs[0].env, "teacher task"),
+                                              env_overrides, "--set env.*"))
+    if cfg.complexmimic.enabled:
+        env_cfg.terminations.max_mean_link_error = cfg.complexmimic.student_tau
+    embodiment = load_embodiment(env_cfg.embodiment)
+    sources: list[str] = []
+    clip_teacher: list[int] = []
+    for index, run in enumerate(runs):
+        for source in run.sources:
+            if source not in sources:  # a clip two teachers trained on goes to the first
+                sources.append(source)
+                clip_teacher.append(index)
+    clips = [factory.load_source(s) for s in sources]
+    check_single_object(clips)
+    source_run = {s: runs[clip_teacher[i]] for i, s in enumerate(sources)}
+    mocap = [mocap_reference(c, embodiment, teacher_env_cfg, source_run[s].checkpoint.parent / "references")
+             for c, s in zip(clips, sources, strict=True)]
+    out = Path(args.out) if args.out else REPO_ROOT / "runs" / f"{time.strftime('%Y%m%d-%H%M%S')}-student"
+    members = [TeacherMember(run.name, run.model, run.checkpoint, run.obs_groups, run.action_offset) for run in runs]
+    return Setup(cfg, env_cfg, teacher_env_cfg, embodiment, runs, sources, clips, mocap,
+                 make_scene(clips[0], embodiment, env_cfg), out, args.device, members, clip_teacher)
+
+
+def rollout_env(setup: Setup, index: int, cfg: InteractionEnvCfg | None = None):
+    """One env (num_envs 1, eval settings) on clip `index`'s MoCap reference, long enough for the whole clip."""
+    from robot_hoi.tasks.interaction.env import InteractionEnv
+
+    cfg = evaluation_cfg(cfg or setup.teacher_env_cfg, num_envs=1)
+    cfg.max_episode_frames = max(cfg.max_episode_frames, setup.mocap[index].num_frames + cfg.warmup_frames + 2)
+    return InteractionEnv(cfg, setup.scene, [setup.mocap[index]])
+
+
+def distil_references(setup: Setup) -> list[tuple[object, str | None]]:
+    """(reference, path relative to OUT/student) per clip: the routed teacher's rollout (None: clip dropped)."""
+    from robot_hoi.student.reference_distill import load_reference, rollout_reference, save_reference
+
+    folder = setup.out / "references"
+    d = setup.cfg.distill
+    results: list[tuple[object, str | None]] = []
+    for i, (clip, source) in enumerate(zip(setup.clips, setup.sources, strict=True)):
+        member = setup.members[setup.clip_teacher[i]]
+        path = folder / f"{factory._safe(clip.name)}.npz"
+        identity = {"source": source, "teacher": member.name, "checkpoint": str(member.checkpoint),
+                    "checkpoint_mtime": member.checkpoint.stat().st_mtime, "min_frames": d.reference_min_frames,
+                    "failure_margin": d.reference_failure_margin}
+        if path.exists():
+            reference, meta = load_reference(path)
+            if {k: meta.get(k) for k in identity} == identity:
+                results.append((reference, f"../references/{path.name}"))
+                print(f"[reference] {clip.name}: reusing {path}")
+                continue
+        env = member.own_env(rollout_env(setup, i))
+        outcome = rollout_reference(env, member.rollout_policy(env), d.reference_min_frames,
+                                    d.reference_failure_margin)
+        print(f"[reference] {clip.name} by {member.name}: {outcome.describe()}")
+        if outcome.reference is None:
+            results.append((None, None))
+            continue
+        save_reference(outcome.reference, path, {**identity, "frames_reached": outcome.frames_reached,
+                                                 "terminated": outcome.terminated})
+        results.append((outcome.reference, f"../references/{path.name}"))
+    return results
+
+
+def build_student(setup: Setup, args: argparse.Namespace):
+    """The student env (with the options' providers and samplers) and its DistillationRunner."""
+    from robot_hoi.student.runner import DistillationRunner
+    from robot_hoi.student.student_env import StudentEnv
+    from robot_hoi.student.tokens import token_layout
+    from robot_hoi.tasks.interaction.env import InteractionEnv
+    from robot_hoi.tasks.interaction.mdp.observations import student_observation_spec
+
+    cfg = setup.cfg
+    if cfg.distill.reference == "teacher":
+        distilled = distil_references(setup)
+    else:
+        distilled = [(m, None) for m in setup.mocap]
+    keep = [i for i, (ref, _) in enumerate(distilled) if ref is not None]
+    if not keep:
+        raise UserError("no teacher rollout tracked its clip long enough to serve as a reference "
+                        f"(distill.reference_min_frames = {cfg.distill.reference_min_frames}); train the teachers "
+                        "longer, or use --set distill.reference=mocap")
+    env = InteractionEnv(setup.env_cfg, setup.scene, [distilled[i][0] for i in keep])
+    timeline = ReferenceTimeline([setup.mocap[i] for i in keep], env.layout.link_names)
+    view = ReferenceView(env, timeline, setup.teacher_env_cfg.keyframes, setup.teacher_env_cfg.warmup_frames)
+    for member in setup.members:
+        member.view = view
+    composite = CompositeTeacher(setup.members, [setup.clip_teacher[i] for i in keep])
+
+    providers, spec_extra = {}, []
+    options = []
+    if cfg.skillmimic.enabled:
+        from robot_hoi.student import skillmimic
+
+        options.append(skillmimic.SkillMimicSetup(cfg.skillmimic, env, setup.out))
+        providers.update(options[-1].providers())
+        spec_extra += options[-1].spec_extra()
+    student_env = StudentEnv(env, providers)
+    spec = student_observation_spec(env) + spec_extra
+    layout = token_layout(spec, setup.env_cfg.student_keyframes)
+    cfg.runner.actor_obs_groups = ["student", *providers]
+    sources = [setup.sources[i] for i in keep]
+    folder = setup.out / STUDENT_GROUP
+    folder.mkdir(parents=True, exist_ok=True)
+    task_extra = {**setup.task_extra, "teachers": [str(r.checkpoint) for r in setup.runs],
+                  "clip_teacher": [setup.members[setup.clip_teacher[i]].name for i in keep],
+                  "dropped_clips": [setup.sources[i] for i in range(len(setup.sources)) if i not in keep]}
+    write_student_task(folder, sources=sources, references=[distilled[i][1] for i in keep], env_cfg=setup.env_cfg,
+                       embodiment_name=setup.embodiment.name, extra=task_extra)
+    torch.manual_seed(cfg.seed)
+    runner = DistillationRunner(student_env, cfg, composite, layout, folder, device=setup.device,
+                                student_info={"obs_spec": spec, "keyframes": list(setup.env_cfg.student_keyframes),
+                                              "sources": sources})
+    if cfg.complexmimic.enabled and cfg.complexmimic.sampling:
+        from robot_hoi.student import complexmimic
+
+        options.append(complexmimic.DifficultySetup(cfg.complexmimic, student_env, setup.task_extra))
+    for option in options:
+        option.attach(runner, student_env)
+    return runner, student_env, keep
+
+
+def run(args: argparse.Namespace) -> int:
+    from robot_hoi.student.teachers import latest_checkpoint
+
+    torch.set_num_threads(max(getattr(args, "torch_threads", 1), 1))
+    setup = prepare(args)
+    budget = parse_budget(args.budget)
+    print(f"student from {len(setup.runs)} teacher(s) on {len(setup.clips)} clip(s) -> {setup.out}")
+    if setup.cfg.complexmimic.enabled:
+        from robot_hoi.student.experts import prepare_experts
+
+        expert_budget = scale_budget(budget, setup.cfg.complexmimic.expert_budget_fraction)
+        budget = scale_budget(budget, 1.0 - setup.cfg.complexmimic.expert_budget_fraction)
+        prepare_experts(setup, expert_budget, resume=args.resume)
+    runner, student_env, keep = build_student(setup, args)
+    folder = setup.out / STUDENT_GROUP
+    if args.resume:
+        latest = latest_checkpoint(folder)
+        if latest is not None:
+            runner.resume(latest)
+            print(f"[student] resumed from {latest} (iteration {runner.iteration})")
+    print(f"[student] obs {student_env.obs_dims}, {student_env.num_envs} envs, "
+          f"{sum(p.numel() for p in runner.model.actor.parameters()):,} actor parameters")
+    stats = runner.learn(budget)
+    runner.close()
+    print(f"[student] {({k: round(v, 3) for k, v in stats.items()})}")
+    if setup.cfg.eval_episodes > 0:
+        report = evaluate_run(setup, runner, keep)
+        atomic_write_text(folder / "eval.json", json.dumps(report, indent=2) + "\n")
+    print(f"done: {folder}")
+    return 0
+
+
+def evaluate_run(setup: Setup, runner, keep: list[int]) -> dict:
+    """Each kept clip: the teacher on MoCap, the student on its reference and on MoCap (what a deploy tracks)."""
+    from robot_hoi.student.evaluation import evaluate_groups, format_table
+    from robot_hoi.student.student_env import StudentEnv
+    from robot_hoi.tasks.interaction.env import InteractionEnv
+
+    episodes = setup.cfg.eval_episodes
+    rows: dict[str, dict[str, dict[str, float]]] = {}
+    model = runner.model.eval()
+    env_refs = runner.env.env.references
+    for k, i in enumerate(keep):
+        clip = setup.clips[i]
+        member = setup.members[setup.clip_teacher[i]]
+        teacher_env = InteractionEnv(evaluation_cfg(setup.teacher_env_cfg, episodes), setup.scene, [setup.mocap[i]])
+        rows.setdefault(f"teacher {member.name} (MoCap)", {})[clip.name] = member.evaluate(teacher_env)
+        for label, reference in (("student (its reference)", env_refs[k]), ("student (MoCap)", setup.mocap[i])):
+            env = InteractionEnv(evaluation_cfg(setup.env_cfg, episodes), setup.scene, [reference])
+            wrapped = StudentEnv(env, runner.env.providers)
+            rows.setdefault(label, {})[clip.name] = evaluate_groups(wrapped, model, runner.cfg.runner.actor_obs_groups)
+    for line in format_table(rows):
+        print(line)
+    return rows

@@ -1,0 +1,163 @@
+"""Distillation with RL fine-tuning (InterMimic Alg. 1) on the PPO runner's hooks.
+
+Each iteration (t = iterations done): the student executes its own sampled action with probability
+min(t / beta, 1), the routed teacher's action otherwise (`_select_actions`, PPO.act with given actions); the
+teacher's mean and std are stored with every transition; the actor minimises w_PPO * L_PPO + w_D * L_distill
+(PPO.surrogate_coef and PPO.extra_actor_loss) and the critic learns the env's (teacher) reward throughout.
+Checkpoints, resume, TensorBoard and progress come from OnPolicyRunner; a student checkpoint is a PPO checkpoint
+with policy_kind "student", the token layout and the task, plus the samplers' state for an exact resume.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any, Protocol
+
+import torch
+from torch import Tensor
+
+from robot_hoi.errors import UserError
+from robot_hoi.rl.checkpoint import save_checkpoint
+from robot_hoi.rl.logger import LogWriter
+from robot_hoi.rl.ppo import PPO
+from robot_hoi.rl.runner import OnPolicyRunner
+from robot_hoi.student.config import StudentTrainConfig
+from robot_hoi.student.distill import (
+    kl_action_loss,
+    l2_action_loss,
+    loss_weights,
+    mix_actions,
+    student_probability,
+)
+from robot_hoi.student.model import StudentActorCritic
+from robot_hoi.student.teachers import CompositeTeacher
+from robot_hoi.student.tokens import TokenLayout
+
+POLICY_KIND = "student"
+
+
+class Stateful(Protocol):
+    def state_dict(self) -> dict: ...
+
+    def load_state_dict(self, state: dict) -> None: ...
+
+
+class DistillationRunner(OnPolicyRunner):
+    def __init__(self, env, cfg: StudentTrainConfig, teacher: CompositeTeacher, layout: TokenLayout,
+                 log_dir: str | Path | None, device: str | torch.device = "cpu",
+                 writers: list[LogWriter] | None = None, student_info: dict | None = None) -> None:
+        super().__init__(env, cfg, log_dir, device, writers)
+        if self.actor_dim != layout.obs_dim:
+            raise UserError(f"student token layout covers {layout.obs_dim} observations, the actor groups "
+                            f"{cfg.runner.actor_obs_groups} give {self.actor_dim}")
+        num_actions = env.num_actions
+        # the base runner built an MLP ActorCritic; the student replaces it (same interface for PPO and checkpoints)
+        self.model = StudentActorCritic(layout, self.critic_dim, num_actions, cfg.student, cfg.model).to(self.device)
+        self.alg = PPO(self.model, cfg.ppo, self.device)
+        try:
+            self.alg.init_storage(env.num_envs, self.actor_dim, self.critic_dim, num_actions,
+                                  {"teacher_mean": num_actions, "teacher_std": num_actions})
+        except ValueError as exc:
+            raise UserError(str(exc)) from None
+        self.alg.extra_actor_loss = self._distillation_loss
+        self.teacher = teacher
+        self.student_info = dict(student_info or {})
+        self.stateful: dict[str, Stateful] = {}  # sampler states saved with each checkpoint
+        self.iteration_hooks: list[Callable[[int], dict[str, float] | None]] = []
+        self._student_probability = 1.0
+        self._weights = (1.0, 0.0)
+        self._hook_scalars: dict[str, float] = {}
+        self._reset_stats()
+
+    def _reset_stats(self) -> None:
+        self._executed_student = torch.zeros(())
+        self._executed_total = 0
+        self._distill_sum = 0.0
+        self._distill_count = 0
+
+    # --- Alg. 1 ------------------------------------------------------------------------------------------------
+    def _on_iteration_start(self) -> None:
+        t = self.iteration
+        self._student_probability = student_probability(t, self.cfg.distill.beta)
+        self._weights = loss_weights(t, self.cfg.distill)
+        self.alg.surrogate_coef = self._weights[0]
+        self._hook_scalars = {}
+        for hook in self.iteration_hooks:
+            self._hook_scalars.update(hook(t) or {})
+
+    def _select_actions(self, actor_obs: Tensor, critic_obs: Tensor, extra_obs: dict[str, Tensor]) -> Tensor:
+        teacher_mean, teacher_std, _ = self.teacher.act(self.env)
+        stored = {"teacher_mean": teacher_mean.to(self.device), "teacher_std": teacher_std.to(self.device)}
+        n = actor_obs.shape[0]
+        if self._student_probability >= 1.0:
+            self._executed_student += n
+            self._executed_total += n
+            return self.alg.act(actor_obs, critic_obs, stored)
+        with torch.no_grad():
+            student = self.model.act(actor_obs)
+        use_student = torch.rand(n, device=self.device) < self._student_probability
+        self._executed_student += use_student.sum()
+        self._executed_total += n
+        return self.alg.act(actor_obs, critic_obs, stored,
+                            actions=mix_actions(student, stored["teacher_mean"], use_student))
+
+    def _distillation_loss(self, extra_obs: dict[str, Tensor], mean: Tensor) -> Tensor:
+        teacher_mean = extra_obs["teacher_mean"]
+        if self.cfg.distill.loss == "kl":
+            raw = kl_action_loss(mean, self.model.action_std.expand_as(mean), teacher_mean,
+                                 extra_obs["teacher_std"])
+        else:
+            raw = l2_action_loss(mean, teacher_mean)
+        self._distill_sum += float(raw.detach())
+        self._distill_count += 1
+        return self._weights[1] * raw
+
+    # --- logging -----------------------------------------------------------------------------------------------
+    def _log(self, stats: dict[str, float], env_logs: dict[str, float], collection_s: float, learning_s: float):
+        scalars = {
+            "Distill/w_ppo": self._weights[0],
+            "Distill/w_distill": self._weights[1],
+            "Distill/student_probability": self._student_probability,
+            "Distill/student_fraction": float(self._executed_student) / max(self._executed_total, 1),
+            f"Distill/{'kl' if self.cfg.distill.loss == 'kl' else 'action_error'}":
+                self._distill_sum / max(self._distill_count, 1),
+            **self._hook_scalars,
+        }
+        self._reset_stats()
+        super()._log(stats, {**env_logs, **scalars}, collection_s, learning_s)
+
+    # --- checkpoints ---------------------------------------------------------------------------------------------
+    def save(self, path: str | Path) -> Path:
+        git = self._git()
+        return save_checkpoint(path, {
+            "policy_kind": POLICY_KIND,
+            "model": self.model.state_dict(),
+            "optimizer": self.alg.optimizer_state(),
+            "iteration": self.iteration,
+            "total_samples": self.total_samples,
+            "total_time_s": self.total_time_s,
+            "config_json": self.cfg.to_json(),
+            "dims": {"actor_obs": self.actor_dim, "critic_obs": self.critic_dim,
+                     "num_actions": self.env.num_actions},
+            "obs_layout": self.obs_layout(),
+            "student": {**self.student_info, "token_layout": self.model.layout.to_dict()},
+            "sampler_state": {name: obj.state_dict() for name, obj in self.stateful.items()},
+            "git_commit": git["commit"],
+            "git_diff": git["diff"],
+            "torch_rng_state": torch.get_rng_state(),
+        })
+
+    def load(self, path: str | Path, load_optimizer: bool = False) -> dict[str, Any]:
+        data = super().load(path, load_optimizer)
+        if data.get("policy_kind") != POLICY_KIND:
+            raise UserError(f"{path}: not a student checkpoint (policy_kind {data.get('policy_kind', 'teacher')!r})")
+        self._loaded = data
+        return data
+
+    def resume(self, path: str | Path) -> None:
+        super().resume(path)
+        states = self._loaded.get("sampler_state", {})
+        for name, obj in self.stateful.items():
+            if name in states:
+                obj.load_state_dict(states[name])

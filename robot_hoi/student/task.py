@@ -1,0 +1,108 @@
+"""The student's task: which clips, which references (distilled or MoCap), which env config; saved as task.json
+beside the student checkpoints so export and evaluation rebuild the exact environment the student trained in."""
+
+from __future__ import annotations
+
+import copy
+import json
+from dataclasses import asdict
+from pathlib import Path
+
+from robot_hoi.errors import UserError
+from robot_hoi.tasks.interaction import factory
+from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg
+from robot_hoi.tasks.interaction.mdp.observations import STUDENT_TERMS
+from robot_hoi.utils.atomic import atomic_write_text
+from robot_hoi.utils.config import load_dataclass
+
+TASK_FILE = factory.TASK_FILE
+STUDENT_GROUP = "student"
+
+
+def evaluation_cfg(env_cfg: InteractionEnvCfg, num_envs: int, seed: int = 0) -> InteractionEnvCfg:
+    """As `robot-hoi eval`: every episode from the stand at the clip start, no spawn noise, no PSI."""
+    cfg = copy.deepcopy(env_cfg)
+    cfg.num_envs = num_envs
+    cfg.seed = seed
+    cfg.init.stand_start_probability = 1.0
+    cfg.init.spawn_noise_xy = 0.0
+    cfg.psi.enabled = False
+    return cfg
+
+
+def student_env_cfg(env_cfg: InteractionEnvCfg) -> InteractionEnvCfg:
+    """The teachers' env config with the deployable observation group switched on."""
+    cfg = copy.deepcopy(env_cfg)
+    cfg.student_obs_terms = tuple(STUDENT_TERMS)
+    return cfg
+
+
+def mocap_reference(clip, embodiment, env_cfg: InteractionEnvCfg, cache: Path | None):
+    from robot_hoi.tasks.interaction.reference import build_reference
+
+    return build_reference(clip, factory.load_or_retarget(clip, embodiment, cache), env_cfg.reference_links)
+
+
+def make_scene(clip, embodiment, env_cfg: InteractionEnvCfg):
+    from robot_hoi.tasks.interaction.scene_setup import InteractionScene
+
+    if clip.object is None:
+        raise UserError(f"clip {clip.name}: no object mesh loaded; the simulation needs it")
+    return InteractionScene(embodiment, clip.object, self_collision=env_cfg.self_collision,
+                            density=env_cfg.object_density, friction=env_cfg.object_friction)
+
+
+def check_single_object(clips) -> None:
+    objects = sorted({c.object_name for c in clips})
+    if len(objects) != 1:
+        raise UserError(f"one student environment holds one object; the teachers' clips use {objects}: "
+                        "distil one student per object (pass --teachers folders of one object)")
+
+
+def write_student_task(folder: Path, *, sources: list[str], references: list[str | None],
+                       env_cfg: InteractionEnvCfg, embodiment_name: str, extra: dict) -> None:
+    """references[i]: path of clip i's distilled reference relative to `folder`, or None (MoCap retarget)."""
+    info = {"sources": sources, "references": references, "group": STUDENT_GROUP, "embodiment": embodiment_name,
+            "env": asdict(env_cfg), **extra}
+    atomic_write_text(folder / TASK_FILE, json.dumps(info, indent=2) + "\n")
+
+
+def read_student_task(checkpoint: Path) -> dict:
+    task = factory.read_task(Path(checkpoint))
+    if task.get("group") != STUDENT_GROUP or "references" not in task:
+        raise UserError(f"{checkpoint}: the {TASK_FILE} beside it is not a student task")
+    return task
+
+
+def task_folder(checkpoint: Path) -> Path:
+    for folder in (checkpoint.parent, checkpoint.parent.parent):
+        if (folder / TASK_FILE).exists():
+            return folder
+    raise UserError(f"{checkpoint}: no {TASK_FILE} beside it")
+
+
+def build_task_env(task: dict, folder: Path, env_cfg: InteractionEnvCfg | None = None,
+                   reference: str = "trained"):
+    """(InteractionEnv, clips, sources) of a student task. reference "trained": the references it trained on
+    (distilled where it had them); "mocap": the clips' MoCap retargets."""
+    from robot_hoi.embodiment import load_embodiment
+    from robot_hoi.student.reference_distill import load_reference
+    from robot_hoi.tasks.interaction.env import InteractionEnv
+
+    embodiment = load_embodiment(task["embodiment"])
+    cfg = env_cfg or load_dataclass(InteractionEnvCfg, task["env"], f"{folder / TASK_FILE}")
+    sources = list(task["sources"])
+    clips = [factory.load_source(s) for s in sources]
+    check_single_object(clips)
+    references = []
+    for clip, rel in zip(clips, task["references"], strict=True):
+        if rel is not None and reference == "trained":
+            path = (folder / rel).resolve()
+            if not path.exists():
+                raise UserError(f"{path}: the student's distilled reference is missing (it is written by "
+                                "`robot-hoi train student`; keep the run folder together)")
+            references.append(load_reference(path)[0])
+        else:
+            references.append(mocap_reference(clip, embodiment, cfg, folder / "references"))
+    env = InteractionEnv(cfg, make_scene(clips[0], embodiment, cfg), references)
+    return env, clips, sources

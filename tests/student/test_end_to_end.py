@@ -1,0 +1,69 @@
+"""End to end through the CLI: a tiny teacher on the embedded clip -> a distilled student -> ONNX -> contract
+check -> deploy dry run. Small networks and few envs keep it well under 90 s on two busy cores."""
+
+import json
+
+import pytest
+
+from robot_hoi.cli import main
+from robot_hoi.student.checkpoint import load_student
+
+QUIET = ["--set", "runner.progress=false", "--set", "runner.tensorboard=false", "--set", "env.num_envs=4",
+         "--set", "env.nthread=1", "--set", "ppo.horizon=8"]
+
+
+@pytest.fixture(scope="module")
+def teacher_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("teachers")
+    assert main(["train", "--budget", "2it", "--out", str(out), *QUIET, "--set", "model.actor_hidden_dims=[32]",
+                 "--set", "model.critic_hidden_dims=[32]"]) == 0
+    return out
+
+
+def student_args(teachers, out, *extra):
+    return ["train", "student", "--teachers", str(teachers), "--budget", "2it", "--out", str(out), *QUIET,
+            "--set", "student.width=32", "--set", "student.heads=2", "--set", "student.feedforward=64",
+            "--set", "model.critic_hidden_dims=[32]", "--set", "distill.reference_min_frames=5",
+            "--set", "distill.reference_failure_margin=2", "--set", "eval_episodes=1", *extra]
+
+
+def test_distil_export_check_and_dry_run(teacher_run, tmp_path, capsys):
+    out = tmp_path / "student"
+    assert main(student_args(teacher_run, out)) == 0
+    printed = capsys.readouterr().out
+    assert "[reference] synth_lift_carry_seed0" in printed and "student (MoCap)" in printed
+    ckpt = out / "student" / "model_2.pt"
+    model, cfg, data = load_student(ckpt)
+    assert cfg.runner.actor_obs_groups == ["student"] and model.layout.keyframes == (1, 2, 4, 16)
+    task = json.loads((out / "student" / "task.json").read_text())
+    assert task["references"] == ["../references/synth_lift_carry_seed0.npz"]
+    assert (out / "references" / "synth_lift_carry_seed0.npz").is_file()
+    report = json.loads((out / "student" / "eval.json").read_text())
+    assert set(report) == {"teacher synthetic-box (MoCap)", "student (its reference)", "student (MoCap)"}
+
+    # resume continues the run and reuses the distilled reference
+    assert main([*student_args(teacher_run, out), "--resume", "--set", "eval_episodes=0"]) == 0
+    assert "reusing" in capsys.readouterr().out
+    assert load_student(out / "student" / "model_4.pt")[2]["iteration"] == 4
+
+    onnx_file = tmp_path / "student.onnx"
+    assert main(["export", "onnx", str(ckpt), "-o", str(onnx_file), "--recorded", "64"]) == 0
+    printed = capsys.readouterr().out
+    assert "ORT vs torch max |diff|" in printed and (tmp_path / "student.motion.npz").is_file()
+    assert main(["export", "check", str(onnx_file), "--embodiment", "g1_inspire"]) == 0
+    assert "policy_kind student" in capsys.readouterr().out
+
+    log_dir = tmp_path / "deploy"
+    assert main(["deploy", "--dry-run", "--policy", str(onnx_file), "--duration", "5", "--auto-start",
+                 "--hand-bus", "can", "--log-dir", str(log_dir)]) == 0
+    summary = json.loads((log_dir / "summary.json").read_text())
+    assert summary["phase_time_s"].get("POLICY", 0.0) > 0.0
+
+
+def test_student_cli_errors_are_one_line(tmp_path, capsys):
+    assert main(["train", "student", "--budget", "1it"]) == 2
+    assert "--teachers" in capsys.readouterr().err
+    assert main(["train", "student", "--teachers", str(tmp_path), "--budget", "1it"]) == 2
+    assert "no teacher groups" in capsys.readouterr().err
+    assert main(["train", "student", "--teachers", str(tmp_path), "--option", "nope"]) == 2
+    assert "known: " in capsys.readouterr().err

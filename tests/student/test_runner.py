@@ -1,0 +1,120 @@
+"""The distillation runner (InterMimic Alg. 1) on a tiny interaction env: schedule, executed actions, stored
+teacher actions, behaviour cloning, checkpoints and resume."""
+
+import pytest
+import torch
+
+from robot_hoi.errors import UserError
+from robot_hoi.rl.budget import Budget
+from robot_hoi.rl.logger import MemoryWriter
+from robot_hoi.student.checkpoint import is_student_checkpoint, load_student
+from robot_hoi.student.config import STUDENT_FAST_CONFIG, load_student_config
+from robot_hoi.student.reference_view import ReferenceTimeline, ReferenceView
+from robot_hoi.student.runner import DistillationRunner
+from robot_hoi.student.student_env import StudentEnv
+from robot_hoi.student.teachers import CompositeTeacher, TeacherMember
+from robot_hoi.student.tokens import token_layout
+from robot_hoi.tasks.interaction.mdp.observations import student_observation_spec
+
+from .conftest import make_env, make_reference, tiny_teacher
+
+TINY = ["runner.progress=false", "runner.tensorboard=false", "student.width=16", "student.heads=2",
+        "student.layers=1", "student.feedforward=32", "model.critic_hidden_dims=[32]", "ppo.horizon=4",
+        "ppo.num_minibatches=2", "ppo.num_epochs=2", "eval_episodes=0"]
+
+
+def build(scene, overrides=(), log_dir=None, num_envs=4):
+    cfg, _ = load_student_config(STUDENT_FAST_CONFIG, overrides=[*TINY, *overrides])
+    env = make_env(scene, [make_reference(scene, 40, drift=0.005)], num_envs=num_envs)
+    teacher = tiny_teacher(env)
+    view = ReferenceView(env, ReferenceTimeline(env.references, env.layout.link_names), env.cfg.keyframes,
+                         env.cfg.warmup_frames)
+    composite = CompositeTeacher([TeacherMember("t", teacher, None, view=view)], [0])
+    memory = MemoryWriter()
+    layout = token_layout(student_observation_spec(env), env.cfg.student_keyframes)
+    runner = DistillationRunner(StudentEnv(env), cfg, composite, layout, log_dir, writers=[memory],
+                                student_info={"sources": ["test"]})
+    return runner, memory, composite
+
+
+def test_schedule_mixture_and_stored_teacher_actions(scene):
+    runner, memory, composite = build(scene, ["distill.beta=4"])
+    runner.learn(Budget(iterations=1))
+    # t = 0: every executed action is the teacher's (stored with each transition as the distillation target)
+    storage = runner.alg.storage
+    assert torch.equal(storage.actions, storage.extra_obs["teacher_mean"])
+    runner.learn(Budget(iterations=5))
+    probability = [v for _, v in memory.scalars["Distill/student_probability"]]
+    assert probability == [0.0, 0.25, 0.5, 0.75, 1.0, 1.0]
+    assert [v for _, v in memory.scalars["Distill/w_ppo"]] == probability
+    assert [v for _, v in memory.scalars["Distill/w_distill"]] == [1 - p for p in probability]
+    fraction = [v for _, v in memory.scalars["Distill/student_fraction"]]
+    assert fraction[0] == 0.0 and fraction[-1] == 1.0 and 0.0 < fraction[2] < 1.0
+    assert runner.alg.surrogate_coef == 1.0
+    # p = 1: the student's own samples are executed, the teacher's action is still stored as the target
+    assert not torch.equal(storage.actions, storage.extra_obs["teacher_mean"])
+    assert "Loss/extra_actor" in memory.scalars and "Distill/action_error" in memory.scalars
+
+
+def test_behaviour_cloning_reduces_the_action_error(scene):
+    runner, memory, _ = build(scene, ["distill.weights=fixed", "distill.lambda_ppo=0.0", "distill.lambda_kd=1.0",
+                                      "ppo.actor_lr=1e-3", "ppo.num_epochs=4"])
+    runner.learn(Budget(iterations=12))
+    errors = [v for _, v in memory.scalars["Distill/action_error"]]
+    assert errors[-1] < 0.6 * errors[0], errors
+
+
+def test_kl_loss_is_logged_as_kl(scene):
+    runner, memory, _ = build(scene, ["distill.loss=kl", "distill.beta=0"])
+    runner.learn(Budget(iterations=2))
+    assert memory.last("Distill/kl") > 0 and memory.last("Distill/student_fraction") == 1.0
+
+
+class Counter:
+    def __init__(self):
+        self.value = 0
+
+    def state_dict(self):
+        return {"value": self.value}
+
+    def load_state_dict(self, state):
+        self.value = state["value"]
+
+
+def test_checkpoint_resume_and_reload(scene, tmp_path):
+    runner, _, _ = build(scene, ["runner.save_interval=2"], log_dir=tmp_path / "a")
+    counter = Counter()
+    runner.stateful["counter"] = counter
+    runner.iteration_hooks.append(lambda t: setattr(counter, "value", counter.value + 1) or {"Test/hook": t})
+    runner.learn(Budget(iterations=3))
+    ckpt = tmp_path / "a" / "model_3.pt"
+    assert is_student_checkpoint(ckpt) and counter.value == 3
+
+    resumed, memory, _ = build(scene, log_dir=tmp_path / "b")
+    other = Counter()
+    resumed.stateful["counter"] = other
+    resumed.resume(ckpt)
+    assert resumed.iteration == 3 and other.value == 3
+    for (name, a), (_, b) in zip(runner.model.state_dict().items(), resumed.model.state_dict().items(), strict=True):
+        assert torch.equal(a, b), name
+    resumed.learn(Budget(iterations=1))
+    assert memory.last("Distill/student_probability") == pytest.approx(3 / 40)  # the schedule continues at t = 3
+
+    model, cfg, data = load_student(ckpt)
+    obs = torch.randn(2, model.num_actor_obs)
+    assert torch.equal(model.act_inference(obs), runner.model.eval().act_inference(obs))
+    assert data["student"]["sources"] == ["test"] and cfg.student.width == 16
+
+
+def test_teacher_checkpoints_are_refused_where_a_student_is_expected(scene, tmp_path):
+    from robot_hoi.rl.checkpoint import save_checkpoint
+
+    runner, _, _ = build(scene)
+    path = runner.save(tmp_path / "s.pt")
+    data = torch.load(path, weights_only=True)
+    data.pop("policy_kind")
+    save_checkpoint(tmp_path / "t.pt", {k: v for k, v in data.items() if k not in ("format", "version")})
+    with pytest.raises(UserError, match="not a student checkpoint"):
+        load_student(tmp_path / "t.pt")
+    with pytest.raises(UserError, match="not a student checkpoint"):
+        runner.load(tmp_path / "t.pt")
