@@ -200,7 +200,9 @@ class Runtime:
 
         target, action = None, None
         if self.phase == Phase.ZERO_TORQUE and now - self.phase_since >= self.safety.zero_torque_s:
-            self._ramp_from = self._measured_q(body, reading)
+            # start from the measured pose, inside the limits (unit conversion can land a hair outside them)
+            self._ramp_from = np.clip(self._measured_q(body, reading), self.contract.joint_lower,
+                                      self.contract.joint_upper)
             self.shaper.reset(self._ramp_from)
             self._enter(Phase.RAMP_TO_DEFAULT, f"ramp to default pose over {self.safety.ramp_s} s", now)
         if self.phase == Phase.RAMP_TO_DEFAULT:
