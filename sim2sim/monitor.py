@@ -1,0 +1,156 @@
+"""The evaluator inside an episode: watches the simulated world at every policy step, ends the episode.
+
+It plugs into the unchanged runtime through two of deploy's own seams:
+    - as the runtime's OperatorInput: each tick it records the robot's state (for videos), lowers the robot
+      off the gantry once the runtime holds the default pose (HOLD), and asks for "stop" when the episode is
+      over, so the runtime leaves POLICY through DAMP as it would on the robot;
+    - around the ONNX policy (MonitoredPolicy): at policy tick t the world holds the state reached after t
+      actions, which is compared with reference frame t; InterMimic's early-termination conditions (the
+      thresholds of configs/tasks/interaction.yaml) end the episode as they end a training episode.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+from scipy.spatial import cKDTree
+
+from deploy.operator import OperatorInput
+from deploy.safety import Phase
+from sim2sim import metrics
+from sim2sim.world import SimWorld
+
+
+@dataclass(frozen=True)
+class Thresholds:
+    """InterMimic early termination (supp. E.1 and Sec. 3.2), as robot_hoi TerminationCfg names them."""
+
+    max_mean_link_error: float = 0.5
+    min_root_height: float = 0.15
+    max_mean_object_point_error: float = 0.5
+    max_interaction_distance_error: float = 0.5
+    max_contact_loss_frames: int = 10
+
+
+@dataclass
+class ReferenceTrack:
+    """Per-frame reference quantities one episode compares against (frames of the policy's motion)."""
+
+    link_pos: np.ndarray  # (T, L, 3)
+    object_points: np.ndarray  # (T, P, 3) world surface samples of the reference object
+    d_hat: np.ndarray  # (T, L, 3) reference link -> nearest object surface point
+    hand_contact: np.ndarray | None  # (T, 2) bool, hands that must touch the object; None: not known
+    points_local: np.ndarray  # (P, 3)
+
+    @classmethod
+    def build(cls, motion, points_local: np.ndarray, hand_contact: np.ndarray | None) -> ReferenceTrack:
+        points_world = metrics.object_points_world(points_local, motion.object_pos, motion.object_quat_wxyz)
+        d_hat = metrics.nearest_surface_vectors(motion.link_pos, points_world)
+        return cls(motion.link_pos, points_world, d_hat, hand_contact, points_local)
+
+
+class EpisodeMonitor(OperatorInput):
+    def __init__(self, world: SimWorld, ref: ReferenceTrack, thresholds: Thresholds, last_frame: int,
+                 keep_qpos: bool = True):
+        self.world = world
+        self.ref = ref
+        self.thresholds = thresholds
+        self.last_frame = int(last_frame)
+        self.keep_qpos = keep_qpos
+        self.runtime = None
+        self._tree = cKDTree(ref.points_local)
+        # per policy tick t >= 1 (frames that count): what the metrics need
+        self.ticks: list[int] = []
+        self.link_pos: list[np.ndarray] = []
+        self.link_error: list[float] = []
+        self.object_error: list[float] = []
+        self.interaction_error: list[float] = []
+        self.qpos_trace: list[np.ndarray] = []
+        self.time_trace: list[float] = []
+        self.phase_trace: list[int] = []
+        self.policy_started_at: float | None = None
+        self.contact_loss = np.zeros(2, dtype=int)
+        self.terminations: list[str] = []
+        self.reached_end = False
+        self.finished = False
+        self._stop_sent = False
+
+    def attach(self, runtime) -> None:
+        self.runtime = runtime
+
+    # ------------------------------------------------------------------ OperatorInput
+    def poll(self) -> list[str]:
+        world = self.world
+        phase = self.runtime.phase if self.runtime is not None else Phase.WAIT_STATE
+        if self.keep_qpos:
+            self.time_trace.append(world.t)
+            self.phase_trace.append(int(phase))
+            self.qpos_trace.append(world.data.qpos.copy())
+        if world.gantry_on and phase in (Phase.HOLD, Phase.POLICY):
+            world.release_gantry()
+        if self.finished and not self._stop_sent:
+            self._stop_sent = True
+            return ["stop"]
+        return []
+
+    # ------------------------------------------------------------------ one policy step
+    def on_policy_step(self, tick: int) -> None:
+        if self.finished:
+            return
+        world = self.world
+        if self.policy_started_at is None:
+            self.policy_started_at = world.t
+        if tick < 1:
+            return
+        mujoco.mj_kinematics(world.model, world.data)  # link frames of the current qpos (mj_step left older ones)
+        f = min(tick, len(self.ref.link_pos) - 1)
+        links = world.link_positions()
+        obj_pos, rot = world.object_frame()
+        points = self.ref.points_local @ rot.T + obj_pos
+        # nearest surface sample of each link, found in the object frame (a KD-tree built once per episode)
+        _, nearest = self._tree.query((links - obj_pos) @ rot)
+        d = points[nearest] - links
+        link_err = float(metrics.mean_position_error(links[None], self.ref.link_pos[f][None])[0])
+        obj_err = float(np.linalg.norm(points - self.ref.object_points[f], axis=-1).mean())
+        inter_err = float(metrics.interaction_distance_error(d, self.ref.d_hat[f]))
+        self.ticks.append(tick)
+        self.link_pos.append(links)
+        self.link_error.append(link_err)
+        self.object_error.append(obj_err)
+        self.interaction_error.append(inter_err)
+
+        th = self.thresholds
+        reasons = []
+        if link_err > th.max_mean_link_error:
+            reasons.append("link_deviation")
+        if world.data.qpos[2] < th.min_root_height:
+            reasons.append("root_too_low")
+        if obj_err > th.max_mean_object_point_error:
+            reasons.append("object_deviation")
+        if inter_err > th.max_interaction_distance_error:
+            reasons.append("interaction_distance")
+        if self.ref.hand_contact is not None:
+            need = self.ref.hand_contact[f]
+            self.contact_loss = np.where(need & ~world.hand_contact(), self.contact_loss + 1, 0)
+            if self.contact_loss.max() > th.max_contact_loss_frames:
+                reasons.append("contact_lost")
+        if reasons:
+            self.terminations = reasons
+            self.finished = True
+        elif tick >= self.last_frame:
+            self.reached_end = True
+            self.finished = True
+
+
+class MonitoredPolicy:
+    """The ONNX policy as the runtime calls it, telling the monitor which policy tick is being computed."""
+
+    def __init__(self, policy, monitor: EpisodeMonitor):
+        self.policy = policy
+        self.monitor = monitor
+
+    def __call__(self, obs: np.ndarray) -> np.ndarray:
+        self.monitor.on_policy_step(self.monitor.runtime.policy_tick)
+        return self.policy(obs)
