@@ -29,6 +29,11 @@ unquoted string is accepted too)
                         The 12 hand joints are the last 12 actuators, left then right, in channel order.
     link_names          [str] * L              robot links/sites of the reference link positions, in order
     reference           {"file": "NAME.motion.npz", "sha256": hex} | null   sidecar next to the .onnx
+    action_offset_mode  "fixed" | "reference"  optional, default "fixed". "reference": the target offset is the
+                                               motion's joint_pos at the frame being stepped to, f(t + 1), instead
+                                               of action_offset (the policy outputs corrections to the reference)
+    warmup_frames       int >= 0               optional, default 0: the reference clock holds frame 0 for this many
+                                               policy ticks (stand-and-approach warmup); f(t) = max(t - warmup, 0)
     data                {"clips": [...], "license": str}
 
 Observation terms (name: size with A actuators, B = A - 12 body joints, K keyframes, L links) are defined in
@@ -51,6 +56,7 @@ from deploy.hand_units import HAND_SIDES, INSPIRE_CHANNELS, HandChannel
 
 CONTRACT_VERSION = "1"
 POLICY_KINDS = ("teacher", "student", "untrained")
+ACTION_OFFSET_MODES = ("fixed", "reference")
 INPUT_NAME = "obs"
 OUTPUT_NAME = "actions"
 HAND_DOF = len(INSPIRE_CHANNELS)
@@ -149,6 +155,8 @@ class PolicyContract:
     link_names: tuple[str, ...]
     reference: ReferenceInfo | None
     data: dict = field(default_factory=dict)
+    action_offset_mode: str = "fixed"
+    warmup_frames: int = 0
 
     @property
     def num_actions(self) -> int:
@@ -184,10 +192,18 @@ class PolicyContract:
     def body_slice(self) -> slice:
         return slice(0, self.num_body)
 
-    def action_to_target(self, action: np.ndarray) -> np.ndarray:
-        """Joint targets (rad): offset + scale * clip(action, -action_clip, action_clip)."""
+    def reference_frame(self, tick: int, num_frames: int) -> int:
+        """Reference frame of policy tick t: f(t) = min(max(t - warmup_frames, 0), T - 1)."""
+        return min(max(int(tick) - self.warmup_frames, 0), num_frames - 1)
+
+    def action_to_target(self, action: np.ndarray, offset: np.ndarray | None = None) -> np.ndarray:
+        """Joint targets (rad): offset + scale * clip(action, -action_clip, action_clip). `offset` is the
+        reference joint_pos of frame f(t + 1) in "reference" mode (required there), else action_offset."""
+        if self.action_offset_mode == "reference" and offset is None:
+            raise ContractError(f"{self.source}: action_offset_mode 'reference' needs the reference joint offset")
         clipped = np.clip(np.asarray(action, dtype=np.float64), -self.action_clip, self.action_clip)
-        return self.action_offset + self.action_scale * clipped
+        base = self.action_offset if offset is None else np.asarray(offset, dtype=np.float64)
+        return base + self.action_scale * clipped
 
     def reference_path(self) -> Path | None:
         if self.reference is None:
@@ -211,6 +227,8 @@ class PolicyContract:
             "link_names": list(self.link_names),
             "reference": None if self.reference is None else vars(self.reference).copy(),
             "data": self.data,
+            "action_offset_mode": self.action_offset_mode,
+            "warmup_frames": int(self.warmup_frames),
         }
         return {key: json.dumps(value) for key, value in values.items()}
 
@@ -348,7 +366,17 @@ def _parse(metadata: dict[str, str], source: str) -> PolicyContract:
     if not isinstance(data, dict) or not isinstance(data.get("clips"), list) or not isinstance(data.get("license"), str):
         raise fail("data", "must be {'clips': [...], 'license': str}")
 
+    offset_mode = _optional_json(metadata, "action_offset_mode", "fixed", fail)
+    if offset_mode not in ACTION_OFFSET_MODES:
+        raise fail("action_offset_mode", f"must be one of {ACTION_OFFSET_MODES}, got {offset_mode!r}")
+    if offset_mode == "reference" and reference is None:
+        raise fail("action_offset_mode", "is 'reference' but the policy names no reference motion")
+    warmup = _optional_json(metadata, "warmup_frames", 0, fail)
+    if isinstance(warmup, bool) or not isinstance(warmup, int) or warmup < 0:
+        raise fail("warmup_frames", f"must be an integer >= 0, got {warmup!r}")
     return PolicyContract(
+        action_offset_mode=offset_mode,
+        warmup_frames=warmup,
         source=source,
         robot_hoi_version=values["robot_hoi.version"],
         embodiment=values["embodiment"],
@@ -364,6 +392,15 @@ def _parse(metadata: dict[str, str], source: str) -> PolicyContract:
         data=data,
         **arrays,
     )
+
+
+def _optional_json(metadata: dict[str, str], key: str, default, fail):
+    if key not in metadata:
+        return default
+    try:
+        return json.loads(metadata[key])
+    except (TypeError, json.JSONDecodeError):
+        raise fail(key, f"is not valid JSON: {metadata[key]!r:.80}") from None
 
 
 def _float_list(value, length: int, key: str, fail) -> np.ndarray:

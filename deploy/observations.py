@@ -8,8 +8,9 @@ Conventions used by all terms:
     Heading frame: the yaw-only frame of the pelvis, H = Rz(yaw(q_pelvis)), with yaw(q) = atan2(R[1,0], R[0,0])
     and q_pelvis from the pose tracker. A world vector v is expressed in it as H^T v.
     rot6(M) = [M00, M10, M20, M01, M11, M21] (first two columns, column-major).
-    Reference frames: t = the policy tick index (0 at the first POLICY tick); for each k in keyframes, in order,
-    frame f_k = min(t + k, T - 1). Reference terms concatenate k-major: [value(f_k1), value(f_k2), ...].
+    Reference frames: t = the policy tick index (0 at the first POLICY tick); the reference clock holds frame 0
+    for the contract's warmup_frames ticks, f(t) = max(t - warmup_frames, 0); for each k in keyframes, in order,
+    frame f_k = min(f(t) + k, T - 1). Reference terms concatenate k-major: [value(f_k1), value(f_k2), ...].
     Joint vectors have the contract's actuator order: body joints, left hand channels, right hand channels.
 """
 
@@ -60,10 +61,11 @@ class ObsContext:
         self.hand_closed_rad = np.concatenate(closes)
 
     def ref_frames(self, tick: int) -> np.ndarray:
-        """f_k = min(t + k, T - 1) for each keyframe k."""
+        """f_k = min(f(t) + k, T - 1) for each keyframe k, f(t) = max(t - warmup_frames, 0)."""
         if self.motion is None:
             raise DeployError(f"{self.contract.source}: reference terms need a motion (none loaded)")
-        return np.minimum(max(int(tick), 0) + self.keyframes, self.motion.num_frames - 1)
+        frame = max(int(tick) - self.contract.warmup_frames, 0)
+        return np.minimum(frame + self.keyframes, self.motion.num_frames - 1)
 
 
 def heading_inverse(state: RobotState) -> np.ndarray:
