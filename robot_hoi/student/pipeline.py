@@ -52,6 +52,7 @@ class Setup:
     device: str = "cpu"
     members: list[TeacherMember] = field(default_factory=list)
     clip_teacher: list[int] = field(default_factory=list)
+    clip_group: list[int] = field(default_factory=list)  # ComplexMimic regime per clip (0 imitate, 1 interact)
     task_extra: dict = field(default_factory=dict)
 
 
@@ -94,7 +95,8 @@ def prepare(args: argparse.Namespace) -> Setup:
     out = Path(args.out) if args.out else REPO_ROOT / "runs" / f"{time.strftime('%Y%m%d-%H%M%S')}-student"
     members = [TeacherMember(run.name, run.model, run.checkpoint, run.obs_groups, run.action_offset) for run in runs]
     return Setup(cfg, env_cfg, teacher_env_cfg, embodiment, runs, sources, clips, mocap,
-                 make_scene(clips[0], embodiment, env_cfg), out, args.device, members, clip_teacher)
+                 make_scene(clips[0], embodiment, env_cfg), out, args.device, members, clip_teacher,
+                 [0] * len(sources))
 
 
 def rollout_env(setup: Setup, index: int, cfg: InteractionEnvCfg | None = None):
@@ -168,7 +170,7 @@ def build_student(setup: Setup, args: argparse.Namespace):
     if cfg.skillmimic.enabled:
         from robot_hoi.student import skillmimic
 
-        options.append(skillmimic.SkillMimicSetup(cfg.skillmimic, env, setup.out))
+        options.append(skillmimic.SkillMimicSetup(cfg.skillmimic, env, setup.out, cfg.seed))
         providers.update(options[-1].providers())
         spec_extra += options[-1].spec_extra()
     student_env = StudentEnv(env, providers)
@@ -190,7 +192,7 @@ def build_student(setup: Setup, args: argparse.Namespace):
     if cfg.complexmimic.enabled and cfg.complexmimic.sampling:
         from robot_hoi.student import complexmimic
 
-        options.append(complexmimic.DifficultySetup(cfg.complexmimic, student_env, setup.task_extra))
+        options.append(complexmimic.DifficultySetup(cfg.complexmimic, [setup.clip_group[i] for i in keep], cfg.seed))
     for option in options:
         option.attach(runner, student_env)
     return runner, student_env, keep
@@ -231,7 +233,7 @@ def run(args: argparse.Namespace) -> int:
 def evaluate_run(setup: Setup, runner, keep: list[int]) -> dict:
     """Each kept clip: the teacher on MoCap, the student on its reference and on MoCap (what a deploy tracks)."""
     from robot_hoi.student.evaluation import evaluate_groups, format_table
-    from robot_hoi.student.student_env import StudentEnv
+    from robot_hoi.student.student_env import StudentEnv, fresh_providers
     from robot_hoi.tasks.interaction.env import InteractionEnv
 
     episodes = setup.cfg.eval_episodes
@@ -245,7 +247,7 @@ def evaluate_run(setup: Setup, runner, keep: list[int]) -> dict:
         rows.setdefault(f"teacher {member.name} (MoCap)", {})[clip.name] = member.evaluate(teacher_env)
         for label, reference in (("student (its reference)", env_refs[k]), ("student (MoCap)", setup.mocap[i])):
             env = InteractionEnv(evaluation_cfg(setup.env_cfg, episodes), setup.scene, [reference])
-            wrapped = StudentEnv(env, runner.env.providers)
+            wrapped = StudentEnv(env, fresh_providers(runner.env.providers, episodes))
             rows.setdefault(label, {})[clip.name] = evaluate_groups(wrapped, model, runner.cfg.runner.actor_obs_groups)
     for line in format_table(rows):
         print(line)

@@ -37,6 +37,11 @@ class ObservationProvider(Protocol):
         ...
 
 
+def fresh_providers(providers: dict[str, ObservationProvider], num_envs: int) -> dict[str, ObservationProvider]:
+    """Providers for another env: stateful ones (with `fresh`) get their own buffers, stateless ones are shared."""
+    return {name: p.fresh(num_envs) if hasattr(p, "fresh") else p for name, p in providers.items()}
+
+
 class StudentEnv:
     def __init__(self, env, providers: dict[str, ObservationProvider] | None = None) -> None:
         self.env = env

@@ -78,3 +78,27 @@ def tiny_teacher(env, seed: int = 0) -> ActorCritic:
     torch.manual_seed(seed)
     cfg = ActorCriticConfig(actor_hidden_dims=[16], critic_hidden_dims=[16], init_log_std=-1.0)
     return ActorCritic(env.obs_dims["policy"], env.obs_dims["critic"], env.num_actions, cfg).eval()
+
+
+# ---- a tiny teacher run on the embedded clip, shared by the CLI tests ------------------------------------------------
+QUIET = ["--set", "runner.progress=false", "--set", "runner.tensorboard=false", "--set", "env.num_envs=4",
+         "--set", "env.nthread=1", "--set", "ppo.horizon=8"]
+
+
+@pytest.fixture(scope="session")
+def teacher_run(tmp_path_factory):
+    from robot_hoi.cli import main
+
+    out = tmp_path_factory.mktemp("teachers")
+    assert main(["train", "--budget", "2it", "--out", str(out), *QUIET, "--set", "model.actor_hidden_dims=[32]",
+                 "--set", "model.critic_hidden_dims=[32]"]) == 0
+    return out
+
+
+def student_args(teachers, out, *extra, budget="2it"):
+    """`robot-hoi train student` with a small Transformer; an untrained teacher falls within ~40 frames, so the
+    distilled reference may be short."""
+    return ["train", "student", "--teachers", str(teachers), "--budget", budget, "--out", str(out), *QUIET,
+            "--set", "student.width=32", "--set", "student.heads=2", "--set", "student.feedforward=64",
+            "--set", "model.critic_hidden_dims=[32]", "--set", "distill.reference_min_frames=5",
+            "--set", "distill.reference_failure_margin=2", "--set", "eval_episodes=1", *extra]

@@ -3,28 +3,10 @@ check -> deploy dry run. Small networks and few envs keep it well under 90 s on 
 
 import json
 
-import pytest
-
 from robot_hoi.cli import main
 from robot_hoi.student.checkpoint import load_student
 
-QUIET = ["--set", "runner.progress=false", "--set", "runner.tensorboard=false", "--set", "env.num_envs=4",
-         "--set", "env.nthread=1", "--set", "ppo.horizon=8"]
-
-
-@pytest.fixture(scope="module")
-def teacher_run(tmp_path_factory):
-    out = tmp_path_factory.mktemp("teachers")
-    assert main(["train", "--budget", "2it", "--out", str(out), *QUIET, "--set", "model.actor_hidden_dims=[32]",
-                 "--set", "model.critic_hidden_dims=[32]"]) == 0
-    return out
-
-
-def student_args(teachers, out, *extra):
-    return ["train", "student", "--teachers", str(teachers), "--budget", "2it", "--out", str(out), *QUIET,
-            "--set", "student.width=32", "--set", "student.heads=2", "--set", "student.feedforward=64",
-            "--set", "model.critic_hidden_dims=[32]", "--set", "distill.reference_min_frames=5",
-            "--set", "distill.reference_failure_margin=2", "--set", "eval_episodes=1", *extra]
+from .conftest import student_args
 
 
 def test_distil_export_check_and_dry_run(teacher_run, tmp_path, capsys):

@@ -1,0 +1,80 @@
+"""Every option as a config switch (--option / --set) and a tiny run of each option through the CLI."""
+
+import json
+
+import pytest
+import torch
+
+from robot_hoi.cli import main
+from robot_hoi.errors import UserError
+from robot_hoi.student.config import STUDENT_FAST_CONFIG, load_student_config, option_overrides
+
+from .conftest import student_args
+
+
+def test_option_presets_set_what_they_say():
+    cfg, env = load_student_config(STUDENT_FAST_CONFIG, ["complexmimic"])
+    assert cfg.complexmimic.enabled and (cfg.distill.loss, cfg.distill.weights, cfg.distill.beta) == ("kl", "fixed", 0)
+    assert env == ["psi.enabled=false"]
+    cfg, _ = load_student_config(STUDENT_FAST_CONFIG, ["skillmimic_v2"])
+    assert cfg.skillmimic.enabled and cfg.skillmimic.history and cfg.skillmimic.max_masked == 10
+    cfg, _ = load_student_config(STUDENT_FAST_CONFIG, ["skillmimic_deployable"])
+    assert cfg.skillmimic.enabled and not cfg.skillmimic.history
+    cfg, _ = load_student_config(STUDENT_FAST_CONFIG, ["ppo_only"])
+    assert (cfg.distill.weights, cfg.distill.lambda_ppo, cfg.distill.lambda_kd, cfg.distill.beta) == ("fixed", 1, 0, 0)
+    cfg, _ = load_student_config(STUDENT_FAST_CONFIG, ["dagger_only"])
+    assert (cfg.distill.lambda_ppo, cfg.distill.lambda_kd) == (0.0, 1.0)
+    cfg, _ = load_student_config(STUDENT_FAST_CONFIG, ["no_reference_distillation"],
+                                 ["distill.reference=teacher"])  # --set wins over an option
+    assert cfg.distill.reference == "teacher"
+    assert option_overrides("no_reference_distillation") == ['distill.reference="mocap"']
+    with pytest.raises(UserError, match="known: "):
+        option_overrides("nope")
+
+
+def test_complexmimic_run(teacher_run, tmp_path, capsys):
+    out = tmp_path / "cm"
+    assert main(student_args(teacher_run, out, "--option", "complexmimic", "--set", "complexmimic.update_every=1",
+                             budget="4it")) == 0
+    printed = capsys.readouterr().out
+    assert "fine-tuning the imitation expert" in printed and "fine-tuning the interaction expert" in printed
+    routing = json.loads((out / "routing.json").read_text())
+    info = routing["synth_lift_carry_seed0"]
+    assert info["group"] == ("imitation" if info["imitation_success"] >= 0.5 else "interaction")
+    for kind, groups in (("imitation", ["policy"]), ("interaction", ["policy", "height_map"])):
+        ckpt = next((out / "experts" / "synthetic-box" / kind).glob("model_*.pt"))
+        data = torch.load(ckpt, weights_only=True)
+        assert data["obs_layout"]["actor_groups"] == groups
+        task = json.loads((ckpt.parent / "task.json").read_text())
+        assert task["env"]["terminations"]["max_mean_link_error"] == (0.25 if kind == "imitation" else 0.5)
+    task = json.loads((out / "student" / "task.json").read_text())
+    assert task["env"]["terminations"]["max_mean_link_error"] == 0.5 and not task["env"]["psi"]["enabled"]
+    assert task["clip_teacher"] == [info["expert"]]
+    rows = [json.loads(line) for line in (out / "student" / "scalars.jsonl").read_text().splitlines()]
+    assert "Distill/kl" in rows[-1] and any("Sampling/max_probability" in r for r in rows)
+
+
+def test_skillmimic_run_and_export_refusal(teacher_run, tmp_path, capsys):
+    out = tmp_path / "sm"
+    assert main(student_args(teacher_run, out, "--option", "skillmimic_v2", "--set",
+                             "skillmimic.history_pretrain_steps=100")) == 0
+    assert "history encoder pre-trained" in capsys.readouterr().out
+    assert (out / "history_encoder.pt").is_file()
+    ckpt = out / "student" / "model_2.pt"
+    data = torch.load(ckpt, weights_only=True)
+    assert data["obs_layout"]["actor_groups"] == ["student", "history"]
+    assert "start_sampler" in data["sampler_state"] and "ats" in data["sampler_state"]
+    rows = [json.loads(line) for line in (out / "student" / "scalars.jsonl").read_text().splitlines()]
+    assert "Sampling/masked_frames_mean" in rows[-1]
+    assert main(["export", "onnx", str(ckpt), "-o", str(tmp_path / "x.onnx")]) == 2
+    assert "history" in capsys.readouterr().err and not (tmp_path / "x.onnx").exists()
+
+
+def test_ablation_run_without_reference_distillation(teacher_run, tmp_path):
+    out = tmp_path / "ppo"
+    assert main(student_args(teacher_run, out, "--option", "no_reference_distillation", "--option", "ppo_only",
+                             "--set", "eval_episodes=0")) == 0
+    task = json.loads((out / "student" / "task.json").read_text())
+    assert task["references"] == [None] and not (out / "references").exists()
+    rows = [json.loads(line) for line in (out / "student" / "scalars.jsonl").read_text().splitlines()]
+    assert [r["Distill/w_distill"] for r in rows] == [0.0, 0.0] and rows[0]["Distill/student_fraction"] == 1.0
