@@ -86,8 +86,10 @@ def _evaluation_settings(env_cfg, args) -> None:
     env_cfg.psi.enabled = False
 
 
-def evaluate(env, model) -> dict[str, float]:
-    """Run each env until its first episode ends; average InterMimic's metrics over those episodes."""
+def evaluate(env, model, stochastic: bool = False) -> dict[str, float]:
+    """Run each env until its first episode ends; average InterMimic's metrics over those episodes.
+
+    Actions are the policy mean, or samples of the policy's Gaussian with `stochastic` (seed torch first)."""
     import torch
 
     obs = env.reset()
@@ -96,7 +98,7 @@ def evaluate(env, model) -> dict[str, float]:
     returns = torch.zeros(env.num_envs)
     with torch.no_grad():
         for _ in range(env.max_episode_length + env.cfg.warmup_frames + 2):
-            actions = model.act_inference(obs["policy"])
+            actions = model.act(obs["policy"]) if stochastic else model.act_inference(obs["policy"])
             obs, reward, terminated, truncated, extras = env.step(actions)
             returns += torch.where(counted, 0.0, reward)
             done = terminated | truncated
