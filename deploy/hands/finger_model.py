@@ -26,6 +26,7 @@ FORCE_LIMIT_ACT = 4000  # FORCE_ACT range is +-4000 g
 DEFAULT_FORCE_SET = 1000
 DEFAULT_STIFFNESS = 20.0  # grams per angle unit past the contact angle
 AT_TARGET_TOL = 0.5
+SAMPLE_PERIOD_S = 0.0005  # reads this close together share one sample of the model
 
 
 def _six(values, dtype=np.float64) -> np.ndarray:
@@ -58,11 +59,14 @@ class FingerModel:
         self._contact = np.full(tables.NUM_DOF, np.nan)  # object surface per finger, nan = nothing there
         self._stiffness = np.full(tables.NUM_DOF, DEFAULT_STIFFNESS)
         self._external = False
+        self._version = 0  # bumped by every change, so a cached sample is never stale
+        self._sample: tuple[int, float, dict] | None = None
 
     # ------------------------------------------------------------------ device side (register writes)
     def command(self, angle_set=None, speed_set=None, force_set=None) -> None:
         """Apply register writes; an ANGLE_SET element of -1 leaves that DoF alone, as on the real hand."""
         with self._lock:
+            self._version += 1
             self._advance()
             if angle_set is not None:
                 new = _six(angle_set, np.int64)
@@ -74,18 +78,26 @@ class FingerModel:
 
     def clear_errors(self) -> None:
         with self._lock:
+            self._version += 1
             self._advance()
             self._errors &= self._sticky
 
     def measure(self) -> dict[str, list[int]]:
-        """Everything the read-only registers report, at the current time."""
+        """Everything the read-only registers report, at the current time. Like the hand's own sensor loop,
+        one sample serves every read within SAMPLE_PERIOD_S unless something changed (a CAN state read is 7
+        requests; re-integrating for each would only cost the simulator CPU)."""
         with self._lock:
+            now = self._clock()
+            if self._sample is not None:
+                version, stamp, values = self._sample
+                if version == self._version and 0.0 <= now - stamp < SAMPLE_PERIOD_S:
+                    return values
             self._advance()
             angles = [min(max(int(round(a)), 0), ANGLE_OPEN) for a in self._angles.tolist()]
             forces = [
                 min(max(int(round(f)), -FORCE_LIMIT_ACT), FORCE_LIMIT_ACT) for f in self._forces.tolist()
             ]
-            return {
+            values = {
                 "ANGLE_ACT": angles,
                 "FORCE_ACT": forces,
                 "POS_ACT": [2 * (ANGLE_OPEN - a) for a in angles],  # stroke 0 = open .. 2000 = closed
@@ -94,6 +106,8 @@ class FingerModel:
                 "STATUS": self._status().tolist(),
                 "TEMP": [min(max(int(round(t)), 0), 100) for t in self._temps.tolist()],
             }
+            self._sample = (self._version, now, values)
+            return values
 
     # ------------------------------------------------------------------ test and sim2sim side
     @property
@@ -119,6 +133,7 @@ class FingerModel:
             [np.nan if c is None else c for c in _six(contact_angles, object)], dtype=np.float64
         )
         with self._lock:
+            self._version += 1
             self._advance()
             self._contact = contact
             self._stiffness = _six(stiffness).copy()
@@ -129,12 +144,14 @@ class FingerModel:
     def set_measured(self, angles, forces) -> None:
         """External physics owns the measurement from now on (until release_measured)."""
         with self._lock:
+            self._version += 1
             self._external = True
             self._angles = _six(angles).copy()
             self._forces = _six(forces).copy()
 
     def release_measured(self) -> None:
         with self._lock:
+            self._version += 1
             self._external = False
             self._t = self._clock()
 
@@ -142,6 +159,7 @@ class FingerModel:
         """OR `bits` into ERROR of the given fingers (all by default). Sticky bits survive CLEAR_ERROR."""
         idx = list(range(tables.NUM_DOF)) if fingers is None else list(fingers)
         with self._lock:
+            self._version += 1
             self._advance()
             self._errors[idx] |= np.uint8(bits)
             if sticky:
@@ -150,10 +168,12 @@ class FingerModel:
     def release_sticky_errors(self) -> None:
         """The persistent cause is gone (e.g. the motor cooled); the bits still need CLEAR_ERROR."""
         with self._lock:
+            self._version += 1
             self._sticky[:] = 0
 
     def set_temperature(self, celsius) -> None:
         with self._lock:
+            self._version += 1
             self._temps = _six(celsius).copy()
 
     # ------------------------------------------------------------------ dynamics

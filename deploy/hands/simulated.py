@@ -64,6 +64,7 @@ class SimulatedHand:
         self.faults_applied: Counter = Counter()
         self.replies_sent = 0
         self.wire_bits = 0  # line bits of every request this hand answered and of its replies
+        self.late_s = 0.0  # total time replies left after the paced wire deadline (simulator's own lag)
         self._faults: deque[str] = deque()
         self._refusals = 0  # writes still to be refused (NACK / Modbus exception)
         self._faults_lock = threading.Lock()
@@ -192,9 +193,13 @@ class SimulatedHand:
     # ----------------------------------------------------------------- pacing and byte faults
     def _wait_for_wire(self, arrival: float, wire_s: float) -> None:
         if self.pace:
-            sleep_until(self.clock.book(arrival, wire_s + self.turnaround_s))
+            deadline = self.clock.book(arrival, wire_s + self.turnaround_s)
         elif self.turnaround_s:
-            sleep_until(arrival + self.turnaround_s)
+            deadline = arrival + self.turnaround_s
+        else:
+            return
+        sleep_until(deadline)
+        self.late_s += time.monotonic() - deadline  # > 0 when this thread was not scheduled in time
 
     def _noise(self, n: int, avoid: bytes) -> bytes:
         """Random bytes without any byte of `avoid`, so noise never contains a frame start by accident."""
