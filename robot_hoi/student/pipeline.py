@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -69,6 +70,8 @@ def prepare(args: argparse.Namespace) -> Setup:
 
     if not getattr(args, "teachers", None):
         raise UserError("robot-hoi train student needs --teachers RUN_DIR (the output folder of `robot-hoi train`)")
+    if getattr(args, "data", None):
+        raise UserError("robot-hoi train student: --data does not apply; the student learns its teachers' clips")
     config_path = args.config or PRESETS[args.preset]
     cfg, env_overrides = load_student_config(config_path, getattr(args, "options", []), args.overrides)
     runs = load_teacher_runs(args.teachers)
@@ -117,7 +120,7 @@ def distil_references(setup: Setup) -> list[tuple[object, str | None]]:
     results: list[tuple[object, str | None]] = []
     for i, (clip, source) in enumerate(zip(setup.clips, setup.sources, strict=True)):
         member = setup.members[setup.clip_teacher[i]]
-        path = folder / f"{factory._safe(clip.name)}.npz"
+        path = folder / f"{re.sub(r'[^A-Za-z0-9_.-]+', '_', clip.name)}.npz"
         identity = {"source": source, "teacher": member.name, "checkpoint": str(member.checkpoint),
                     "checkpoint_mtime": member.checkpoint.stat().st_mtime, "min_frames": d.reference_min_frames,
                     "failure_margin": d.reference_failure_margin}

@@ -133,3 +133,16 @@ def test_interaction_expert_starts_as_the_teacher():
     assert torch.allclose(expert.act_inference(torch.cat([obs, height], 1)), teacher.act_inference(obs))
     assert torch.allclose(expert.evaluate(torch.cat([critic, height], 1)), teacher.evaluate(critic))
     assert expert.actor_normalizer.mean[-4:].tolist() == pytest.approx([0.3] * 4)
+
+
+def test_env_start_hook_resets_envs_onto_the_sampled_clips(scene):
+    from .conftest import make_env, make_reference
+
+    env = make_env(scene, [make_reference(scene, 20, name="a"), make_reference(scene, 30, name="b")], num_envs=6)
+    env.start_sampler = StartSampler(6, 2, torch.Generator().manual_seed(0), lambda: torch.tensor([0.0, 1.0]))
+    env.reset()
+    assert (env.clip_id == 1).all()
+    assert ((env.ref_index >= env.clip_start[1]) & (env.ref_index <= env.clip_end[1])).all()
+    for _ in range(3):
+        env.step(torch.zeros(6, env.num_actions))
+    assert (env.clip_id == 1).all()
