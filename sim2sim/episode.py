@@ -105,7 +105,9 @@ def run_episode(job: EpisodeJob) -> dict:
     tracker = MujocoTracker(world, job.perturbation, np.random.default_rng(seeds[3]), rate_hz=job.tracker_rate_hz)
     last_frame = motion.num_frames - 1 if job.max_frames is None else min(job.max_frames, motion.num_frames - 1)
     ref = ReferenceTrack.build(motion, target.object_points, target.hand_contact)
-    monitor = EpisodeMonitor(world, ref, job.thresholds, last_frame, keep_qpos=job.keep_traces)
+    warmup = int(getattr(contract, "warmup_frames", 0))
+    monitor = EpisodeMonitor(world, ref, job.thresholds, last_frame, keep_qpos=job.keep_traces,
+                             warmup_frames=warmup)
     hands = SimulatedInspireHands(world, contract, clock, transport=job.hand_transport, link=job.hand_link,
                                    rate_hz=job.hand_rate_hz)
     try:
@@ -119,7 +121,7 @@ def run_episode(job: EpisodeJob) -> dict:
         pre_policy = safety.zero_torque_s + safety.ramp_s + safety.auto_start_after_s + 0.5
         run_wall0, run_cpu0 = time.perf_counter(), time.process_time()
         clock._awake_since = run_wall0
-        summary = runtime.run(duration_s=pre_policy + last_frame / motion.fps + 2.0)
+        summary = runtime.run(duration_s=pre_policy + (last_frame + warmup) / motion.fps + 2.0)
         run_wall, run_cpu = time.perf_counter() - run_wall0, time.process_time() - run_cpu0
     finally:
         hands.close()
@@ -144,7 +146,7 @@ def _result(job, contract, world, clock, monitor, recorder, summary, run_time, w
     target = job.target
     motion = target.motion
     success, outcome = _outcome(monitor, summary)
-    frames = np.minimum(np.asarray(monitor.ticks, dtype=int), motion.num_frames - 1)
+    frames = np.asarray(monitor.frames, dtype=int)
     link_pos = np.asarray(monitor.link_pos).reshape(-1, len(contract.link_names), 3)
     link_names = list(contract.link_names)
     body_links = metrics.body_link_indices(link_names)

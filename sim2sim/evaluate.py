@@ -199,7 +199,7 @@ def evaluate(o: Sim2SimOptions) -> tuple[dict, dict[str, Path]]:
         "timing": timing,
     }
     if previous is not None:
-        _merge_previous(report, previous, label_b)
+        _merge_previous(report, previous)
 
     plots = _plots(report, results, entries, perturbations, plotting)
     report["videos"], report["render"] = _videos(results, entries, out, o.videos, say)
@@ -213,10 +213,11 @@ def _safety() -> dict:
     return dict(SIM2SIM_SAFETY)
 
 
-def _merge_previous(report: dict, previous: dict, label: str) -> None:
-    """Bring a previous run's policies and cells into this report under label B."""
-    old_labels = [p["label"] for p in previous["policies"]]
-    rename = {old: (label if len(old_labels) == 1 else f"{label}:{old}") for old in old_labels}
+def _merge_previous(report: dict, previous: dict) -> None:
+    """Bring a previous run's policies and cells into this report (a label already taken gets "(previous)")."""
+    taken = {p["label"] for p in report["policies"]}
+    rename = {p["label"]: p["label"] if p["label"] not in taken else f"{p['label']} (previous)"
+              for p in previous["policies"]}
     for p in previous["policies"]:
         report["policies"].append(dict(p, label=rename[p["label"]], origin=f"previous run ({previous['created']})"))
     for c in previous["cells"]:

@@ -5,7 +5,8 @@ It plugs into the unchanged runtime through two of deploy's own seams:
       off the gantry once the runtime holds the default pose (HOLD), and asks for "stop" when the episode is
       over, so the runtime leaves POLICY through DAMP as it would on the robot;
     - around the ONNX policy (MonitoredPolicy): at policy tick t the world holds the state reached after t
-      actions, which is compared with reference frame t; InterMimic's early-termination conditions (the
+      actions, which is compared with the reference frame of tick t (f(t) = t - warmup_frames, held at 0 during
+      the policy's warmup, as the runtime's observation does); InterMimic's early-termination conditions (the
       thresholds of configs/tasks/interaction.yaml) end the episode as they end a training episode.
 """
 
@@ -53,16 +54,18 @@ class ReferenceTrack:
 
 class EpisodeMonitor(OperatorInput):
     def __init__(self, world: SimWorld, ref: ReferenceTrack, thresholds: Thresholds, last_frame: int,
-                 keep_qpos: bool = True):
+                 keep_qpos: bool = True, warmup_frames: int = 0):
         self.world = world
         self.ref = ref
         self.thresholds = thresholds
         self.last_frame = int(last_frame)
+        self.warmup_frames = int(warmup_frames)
         self.keep_qpos = keep_qpos
         self.runtime = None
         self._tree = cKDTree(ref.points_local)
         # per policy tick t >= 1 (frames that count): what the metrics need
         self.ticks: list[int] = []
+        self.frames: list[int] = []
         self.link_pos: list[np.ndarray] = []
         self.link_error: list[float] = []
         self.object_error: list[float] = []
@@ -105,7 +108,7 @@ class EpisodeMonitor(OperatorInput):
         if tick < 1:
             return
         mujoco.mj_kinematics(world.model, world.data)  # link frames of the current qpos (mj_step left older ones)
-        f = min(tick, len(self.ref.link_pos) - 1)
+        f = self.frame_of(tick)
         links = world.link_positions()
         obj_pos, rot = world.object_frame()
         points = self.ref.points_local @ rot.T + obj_pos
@@ -116,6 +119,7 @@ class EpisodeMonitor(OperatorInput):
         obj_err = float(np.linalg.norm(points - self.ref.object_points[f], axis=-1).mean())
         inter_err = float(metrics.interaction_distance_error(d, self.ref.d_hat[f]))
         self.ticks.append(tick)
+        self.frames.append(f)
         self.link_pos.append(links)
         self.link_error.append(link_err)
         self.object_error.append(obj_err)
@@ -131,7 +135,7 @@ class EpisodeMonitor(OperatorInput):
             reasons.append("object_deviation")
         if inter_err > th.max_interaction_distance_error:
             reasons.append("interaction_distance")
-        if self.ref.hand_contact is not None:
+        if self.ref.hand_contact is not None and tick > self.warmup_frames:  # training: not during warmup
             need = self.ref.hand_contact[f]
             self.contact_loss = np.where(need & ~world.hand_contact(), self.contact_loss + 1, 0)
             if self.contact_loss.max() > th.max_contact_loss_frames:
@@ -139,9 +143,13 @@ class EpisodeMonitor(OperatorInput):
         if reasons:
             self.terminations = reasons
             self.finished = True
-        elif tick >= self.last_frame:
+        elif f >= self.last_frame:
             self.reached_end = True
             self.finished = True
+
+    def frame_of(self, tick: int) -> int:
+        """Reference frame of policy tick t (deploy.contract: the clock holds frame 0 during the warmup)."""
+        return min(max(int(tick) - self.warmup_frames, 0), len(self.ref.link_pos) - 1)
 
 
 class MonitoredPolicy:
