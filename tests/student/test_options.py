@@ -78,3 +78,16 @@ def test_ablation_run_without_reference_distillation(teacher_run, tmp_path):
     assert task["references"] == [None] and not (out / "references").exists()
     rows = [json.loads(line) for line in (out / "student" / "scalars.jsonl").read_text().splitlines()]
     assert [r["Distill/w_distill"] for r in rows] == [0.0, 0.0] and rows[0]["Distill/student_fraction"] == 1.0
+
+
+def test_deployable_skillmimic_student_exports(teacher_run, tmp_path, capsys):
+    out = tmp_path / "smd"
+    assert main(student_args(teacher_run, out, "--option", "skillmimic_deployable", "--option", "dagger_only",
+                             "--set", "skillmimic.neighbourhood_probability=1.0", "--set", "eval_episodes=0")) == 0
+    rows = [json.loads(line) for line in (out / "student" / "scalars.jsonl").read_text().splitlines()]
+    assert [r["Distill/w_ppo"] for r in rows] == [0.0, 0.0] and [r["Distill/w_distill"] for r in rows] == [1.0, 1.0]
+    assert all("Sampling/masked_frames_mean" in r for r in rows) and not (out / "history_encoder.pt").exists()
+    onnx_file = tmp_path / "smd.onnx"
+    assert main(["export", "onnx", str(out / "student" / "model_2.pt"), "-o", str(onnx_file), "--recorded", "32"]) == 0
+    assert main(["export", "check", str(onnx_file)]) == 0
+    assert "policy_kind student" in capsys.readouterr().out
