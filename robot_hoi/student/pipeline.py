@@ -1,7 +1,15 @@
 """`robot-hoi train student`: teachers -> (options) -> distilled references -> student env -> Alg. 1 -> evaluation.
 
+    robot-hoi train --budget 2h --out runs/teachers                       # teachers (one per subject-object group)
+    robot-hoi train student --teachers runs/teachers --budget 1h --out runs/student
+    robot-hoi train student --teachers runs/teachers --option complexmimic --set complexmimic.update_every=20
+    robot-hoi train student --teachers runs/teachers --option skillmimic_deployable --resume
+    robot-hoi export onnx runs/student/student/model_<it>.pt -o policies/student.onnx
+
 Run folder OUT/: student/ (checkpoints, task.json, TensorBoard, scalars.jsonl, eval.json), references/ (distilled
-references, reused on --resume), and with ComplexMimic experts/<group>/{imitation,interaction}/ and routing.json.
+references, reused on --resume), and with ComplexMimic experts/<group>/{imitation,interaction}/ and routing.json,
+with SkillMimic-V2 history_encoder.pt. The student env is the teachers' env config (they must agree on it) with
+the deployable observation switched on; `--set env.*` changes it, other `--set` keys the student config.
 """
 
 from __future__ import annotations
