@@ -36,65 +36,6 @@ GRAMS_PER_NEWTON = 1.0 / 9.81e-3
 DOF = 6
 
 
-class PhysicsFingerModel(FingerModel):
-    """deploy's FingerModel whose measurement comes from MuJoCo; `measure()` is computed once per change.
-
-    The runtime reads three register blocks per hand per tick and the device rebuilds every read-only register
-    for each; between two physics updates nothing changes, so the result is cached and every mutator drops it.
-    """
-
-    READS = frozenset({"measure", "commanded_angles", "angles", "forces"})
-
-    def __init__(self, *args, **kwargs):
-        self._cached: dict[str, list[int]] | None = None
-        super().__init__(*args, **kwargs)
-
-    def measure(self) -> dict[str, list[int]]:
-        cached = self._cached
-        if cached is None:
-            cached = self._cached = super().measure()
-        return {k: list(v) for k, v in cached.items()}
-
-    def _changed(self) -> None:
-        self._cached = None
-
-    def command(self, *args, **kwargs) -> None:
-        super().command(*args, **kwargs)
-        self._changed()
-
-    def clear_errors(self) -> None:
-        super().clear_errors()
-        self._changed()
-
-    def place_object(self, *args, **kwargs) -> None:
-        super().place_object(*args, **kwargs)
-        self._changed()
-
-    def remove_object(self) -> None:
-        super().remove_object()
-        self._changed()
-
-    def set_measured(self, angles, forces) -> None:
-        super().set_measured(angles, forces)
-        self._changed()
-
-    def release_measured(self) -> None:
-        super().release_measured()
-        self._changed()
-
-    def set_error_bits(self, *args, **kwargs) -> None:
-        super().set_error_bits(*args, **kwargs)
-        self._changed()
-
-    def release_sticky_errors(self) -> None:
-        super().release_sticky_errors()
-        self._changed()
-
-    def set_temperature(self, celsius) -> None:
-        super().set_temperature(celsius)
-        self._changed()
-
-
 class SimulatedInspireHands:
     """Two simulated Inspire devices whose fingers are the world's hand joints; `hands` is deploy's Hands."""
 
@@ -111,7 +52,7 @@ class SimulatedInspireHands:
         opens, closes = zip(*(channel_arrays(contract.hands[s]) for s in HAND_SIDES), strict=True)
         self.open_rad = np.concatenate(opens)
         self.closed_rad = np.concatenate(closes)
-        self.fingers = {side: PhysicsFingerModel(clock=clock.now) for side in HAND_SIDES}
+        self.fingers = {side: FingerModel(clock=clock.now) for side in HAND_SIDES}
         self.setpoint = np.full(2 * DOF, float(UNITS_OPEN))
         self.dt = 1.0 / rate_hz
         self.devices = []
