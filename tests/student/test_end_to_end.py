@@ -49,3 +49,31 @@ def test_student_cli_errors_are_one_line(tmp_path, capsys):
     assert "no teacher groups" in capsys.readouterr().err
     assert main(["train", "student", "--teachers", str(tmp_path), "--option", "nope"]) == 2
     assert "known: " in capsys.readouterr().err
+
+
+def test_two_teachers_one_student(tmp_path, capsys):
+    from .conftest import QUIET
+
+    teachers = tmp_path / "teachers"
+    assert main(["train", "--data", "embedded:lift_carry", "embedded:push", "--group", "clip", "--budget", "2it",
+                 "--out", str(teachers), *QUIET, "--set", "model.actor_hidden_dims=[32]",
+                 "--set", "model.critic_hidden_dims=[32]"]) == 0
+    groups = sorted(p.name for p in teachers.iterdir())
+    assert len(groups) == 2
+    out = tmp_path / "student"
+    assert main(student_args(teachers, out, "--set", "eval_episodes=0", "--set", "distill.reference=mocap")) == 0
+    task = json.loads((out / "student" / "task.json").read_text())
+    assert len(task["sources"]) == 2 and sorted(task["clip_teacher"]) == groups
+    capsys.readouterr()
+
+    # teachers trained with other observation settings cannot share one student env
+    import shutil
+
+    mixed = tmp_path / "mixed"
+    shutil.copytree(teachers, mixed)
+    task_file = mixed / groups[1] / "task.json"
+    changed = json.loads(task_file.read_text())
+    changed["env"]["keyframes"] = [1, 8]
+    task_file.write_text(json.dumps(changed))
+    assert main(student_args(mixed, tmp_path / "refused")) == 2
+    assert "different task settings (keyframes)" in capsys.readouterr().err
