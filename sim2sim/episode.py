@@ -68,6 +68,7 @@ class MemoryRecorder(TickRecorder):
 
 
 _POLICIES: dict[str, OnnxPolicy] = {}
+_TRACKS: dict[tuple[str, str, int], ReferenceTrack] = {}
 
 
 def _policy(path: str) -> OnnxPolicy:
@@ -104,7 +105,10 @@ def run_episode(job: EpisodeJob) -> dict:
     body = MujocoBody(world, contract.num_body, job.perturbation, np.random.default_rng(seeds[2]))
     tracker = MujocoTracker(world, job.perturbation, np.random.default_rng(seeds[3]), rate_hz=job.tracker_rate_hz)
     last_frame = motion.num_frames - 1 if job.max_frames is None else min(job.max_frames, motion.num_frames - 1)
-    ref = ReferenceTrack.build(motion, target.object_points, target.hand_contact)
+    key = (target.name, motion.source, motion.num_frames)
+    if key not in _TRACKS:  # a worker runs many episodes of the same clip
+        _TRACKS[key] = ReferenceTrack.build(motion, target.object_points, target.hand_contact)
+    ref = _TRACKS[key]
     warmup = int(getattr(contract, "warmup_frames", 0))
     monitor = EpisodeMonitor(world, ref, job.thresholds, last_frame, keep_qpos=job.keep_traces,
                              warmup_frames=warmup)

@@ -144,23 +144,26 @@ class SimWorld:
             self._push_until = t + p.push_duration_s
             self._next_push = t + self.rng.uniform(*p.push_interval_s)
             self.pushes.append((t, (p.push_dv * direction).tolist()))
-        force = self._push_force if t < self._push_until else np.zeros(3)
-        self.data.xfrc_applied[self.layout.pelvis, 0:3] = force
+        self.data.xfrc_applied[self.layout.pelvis, 0:3] = self._push_force if t < self._push_until else 0.0
 
     # ------------------------------------------------------------------ stepping
     def advance_to(self, t_target: float) -> None:
         """Step PD updates until simulation time reaches t_target (never backwards)."""
-        m, d, lay = self.model, self.data, self.layout
-        while self.t < t_target - 1e-9:
-            self._take_due_commands()
-            for listener in self.listeners:
-                if self.t >= listener.next_t - 1e-9:
-                    listener.callback(self.t)
+        m, d, act, substeps, pd_dt = self.model, self.data, self.layout.body_act, self.substeps, self.pd_dt
+        end_tick = int(np.ceil(t_target / pd_dt - 1e-6))
+        listeners = self.listeners
+        while self.pd_ticks < end_tick:
+            t = self.pd_ticks * pd_dt
+            if self._pending and self._pending[0][0] <= t + 1e-9:
+                self._take_due_commands()
+            for listener in listeners:
+                if t >= listener.next_t - 1e-9:
+                    listener.callback(t)
                     listener.next_t += listener.period_s
-            if self._next_push is not None or self._push_until >= 0:
+            if self._next_push is not None:
                 self._update_push()
-            d.ctrl[lay.body_act] = self._pd_torque()
-            mujoco.mj_step(m, d, nstep=self.substeps)
+            d.ctrl[act] = self._pd_torque()
+            mujoco.mj_step(m, d, nstep=substeps)
             self.pd_ticks += 1
 
     # ------------------------------------------------------------------ what sensors see
