@@ -159,7 +159,9 @@ def _result(job, contract, world, clock, monitor, recorder, summary, run_time, w
                                         body_links, root)
     rows = recorder.rows
     policy_rows = [r for r in rows if int(r["phase"]) == Phase.POLICY]
-    stack = lambda key: np.array([r[key] for r in policy_rows]).reshape(len(policy_rows), -1)  # noqa: E731
+    def stack(key: str) -> np.ndarray:  # (policy ticks, 12); empty when the policy never ran
+        return np.array([r[key] for r in policy_rows]).reshape(-1, 12)
+
     hand = metrics.hand_command_stats(stack("cmd_hand_units"), stack("hand_angles"), stack("hand_forces"))
     n = min(len(rows), len(clock.tick_wall_s))
     policy_tick_wall = [clock.tick_wall_s[i] for i in range(n) if int(rows[i]["phase"]) == Phase.POLICY]

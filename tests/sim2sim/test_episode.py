@@ -62,3 +62,12 @@ def test_a_fall_is_a_failure(stand_policy, target):
     r = run_episode(_job(stand_policy, target, perturbation=weak, max_frames=200))
     assert not r["success"]
     assert any(t in r["terminations"] for t in ("link_deviation", "root_too_low")) or r["runtime"]["faults"]
+
+
+def test_stale_mocap_keeps_the_policy_from_starting(stand_policy, target):
+    # poses older than two control periods: the runtime never leaves WAIT_STATE and gives up, nothing commanded
+    late = replace(NOMINAL, tracker_latency_s=0.2)
+    r = run_episode(_job(stand_policy, target, perturbation=late))
+    assert not r["success"] and r["outcome"].startswith("policy never started")
+    assert r["runtime"]["final_phase"] == "WAIT_STATE" and r["evaluated_frames"] == 0
+    assert np.isnan(r["E_h_cm"]) and np.isnan(r["hand"]["mean_command"])
