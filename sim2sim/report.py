@@ -89,7 +89,10 @@ def _overview(report: dict) -> list[str]:
         f"bytes ({report['settings']['hand_link']} link) to simulated Inspire devices; mocap "
         f"{report['settings']['tracker_rate_hz']:g} Hz",
         f"- run: {t['episodes']} episode(s), {t['simulated_s']:.1f} simulated s in {t['wall_s']:.1f} s wall on "
-        f"{t['workers']} worker(s): {fmt_rtf(t.get('realtime_factor_per_core'))} x real time per core",
+        f"{t['workers']} worker(s) (start-up included: {fmt_rtf(t.get('realtime_factor_per_core'))} x real time per "
+        f"core); an episode ran at {fmt_rtf(t.get('realtime_factor_per_episode'))} x real time, "
+        f"{fmt_rtf(t.get('realtime_factor_per_cpu_second'))} x per CPU second"
+        + (f" (load average {t['load_average']:.1f})" if t.get("load_average") is not None else ""),
     ]
     render = report.get("render", {})
     if render.get("message"):

@@ -60,18 +60,28 @@ def run_jobs(jobs: list[EpisodeJob], workers: int, progress: Callable[[dict], No
                     progress(result)
     wall = time.perf_counter() - wall0
     done = [r for r in results if r is not None]
-    sim_s = sum(r["timing"]["sim_s"] for r in done if "timing" in r)
-    cpu_s = sum(r["timing"]["episode_cpu_s"] for r in done if "timing" in r)
-    timing = {
+    return done, run_timing(done, wall, workers)
+
+
+def run_timing(results: list[dict], wall: float, workers: int) -> dict:
+    """Speed of a run. Per core: simulated time over the wall time of the processes (start-up included);
+    per episode: simulated time over each episode's own wall time; per CPU second: over the CPU time the
+    episodes used (what one core delivers when nothing else shares it)."""
+    timed = [r["timing"] for r in results if "timing" in r]
+    sim_s = sum(t["sim_s"] for t in timed)
+    cpu_s = sum(t["episode_cpu_s"] for t in timed)
+    episode_wall = sum(t["episode_wall_s"] for t in timed)
+    return {
         "workers": workers,
         "wall_s": wall,
         "simulated_s": sim_s,
         "episode_cpu_s": cpu_s,
         "realtime_factor_total": sim_s / wall if wall > 0 else None,
         "realtime_factor_per_core": sim_s / wall / workers if wall > 0 else None,
+        "realtime_factor_per_episode": sim_s / episode_wall if episode_wall > 0 else None,
         "realtime_factor_per_cpu_second": sim_s / cpu_s if cpu_s > 0 else None,
+        "load_average": os.getloadavg()[0] if hasattr(os, "getloadavg") else None,
     }
-    return done, timing
 
 
 def _indexed(item: tuple[int, EpisodeJob]) -> tuple[int, dict]:
