@@ -84,8 +84,9 @@ def handler(args: argparse.Namespace) -> int:
         print(f"  {cell['clip']:<28} {cell['perturbation']:<24} success {success}  "
               f"E_h {'-' if e_h is None else f'{e_h:.1f} cm'}")
     t = report["timing"]
-    print(f"  {t['simulated_s']:.1f} simulated s in {t['wall_s']:.1f} s on {t['workers']} process(es): "
-          f"{fmt_rtf(t['realtime_factor_per_core'])} x real time per core")
+    print(f"  {t['simulated_s']:.1f} simulated s in {t['wall_s']:.1f} s on {t['workers']} process(es): an episode ran "
+          f"at {fmt_rtf(t['realtime_factor_per_episode'])} x real time, "
+          f"{fmt_rtf(t['realtime_factor_per_cpu_second'])} x per CPU second")
     errors = [e for c in report["cells"] for e in c["errors"]]
     if errors:
         print(f"  {len(errors)} episode(s) crashed; first: {errors[0]}", file=sys.stderr)
