@@ -194,7 +194,7 @@ def _result(job, contract, world, clock, monitor, recorder, summary, run_time, w
             "physics_wall_s": clock.physics_wall_s,
             "realtime_factor": sim_s / run_wall if run_wall > 0 else None,
             "pd_updates": world.pd_ticks,
-            "torque_saturated_fraction": world.torque_saturated_updates / max(world.pd_ticks, 1),
+            "torque_saturated_fraction": monitor.policy_torque_saturation(),
         },
         "pushes": world.pushes,
     }

@@ -74,6 +74,7 @@ class EpisodeMonitor(OperatorInput):
         self.time_trace: list[float] = []
         self.phase_trace: list[int] = []
         self.policy_started_at: float | None = None
+        self.saturation_at_start = self.saturation_now = (0, 0)  # (saturated PD updates, PD updates)
         self.contact_loss = np.zeros(2, dtype=int)
         self.terminations: list[str] = []
         self.reached_end = False
@@ -105,6 +106,8 @@ class EpisodeMonitor(OperatorInput):
         world = self.world
         if self.policy_started_at is None:
             self.policy_started_at = world.t
+            self.saturation_at_start = (world.torque_saturated_updates, world.pd_ticks)
+        self.saturation_now = (world.torque_saturated_updates, world.pd_ticks)
         if tick < 1:
             return
         mujoco.mj_kinematics(world.model, world.data)  # link frames of the current qpos (mj_step left older ones)
@@ -150,6 +153,12 @@ class EpisodeMonitor(OperatorInput):
     def frame_of(self, tick: int) -> int:
         """Reference frame of policy tick t (deploy.contract: the clock holds frame 0 during the warmup)."""
         return min(max(int(tick) - self.warmup_frames, 0), len(self.ref.link_pos) - 1)
+
+
+    def policy_torque_saturation(self) -> float | None:
+        """Share of the PD updates while the policy ran in which some motor hit its effort limit."""
+        updates = self.saturation_now[1] - self.saturation_at_start[1]
+        return (self.saturation_now[0] - self.saturation_at_start[0]) / updates if updates > 0 else None
 
 
 class MonitoredPolicy:

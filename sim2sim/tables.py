@@ -113,9 +113,10 @@ def result_tables(report: dict) -> list[Table]:
                 (_path("timing", "realtime_factor", "mean"), 1))])
         tables.append(Table(f"Loop timing: {clip}", ["perturbation", "tick wall p50 (ms)", "tick wall p99 (ms)",
                                                      "period error p99 (ms, sim)", "clamped ticks",
-                                                     "torque saturated (%)", "real-time factor"], timing_rows,
+                                                     "torque-limited PD updates (%)", "real-time factor"], timing_rows,
                             "tick wall = wall time of one policy tick on this machine (observation, ONNX, "
-                            "hand bytes, safety); period error: simulated clock vs the PD update grid"))
+                            "hand bytes, safety); period error: simulated clock vs the PD update grid; torque-limited: share of the PD "
+                            "updates while the policy ran in which a motor hit its effort limit"))
     return tables
 
 

@@ -39,6 +39,7 @@ def test_standing_policy_runs_the_runtime_through_every_phase(stand_policy, targ
     assert bus["left"]["cycles"] > 20 and bus["left"]["link_errors"] == 0 and bus["right"]["link_errors"] == 0
     assert r["hand"]["open_fraction"] > 0.5  # default pose: fingers open
     assert 0 < r["timing"]["sim_s"] and r["timing"]["realtime_factor"] > 0
+    assert r["timing"]["torque_saturated_fraction"] < 0.05  # standing needs far less than the effort limits
 
 
 def test_episodes_are_reproducible(stand_policy, target):
