@@ -29,7 +29,9 @@ def register(subparsers) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("--policy", required=True, help="deployable ONNX policy (robot-hoi export onnx)")
-    p.add_argument("--motion", default=None, help="reference .motion.npz (default: the policy's sidecar)")
+    p.add_argument("--motion", default=None,
+                   help="reference .motion.npz to track (default: the policy's sidecar); the object is the one of "
+                        "the clip the policy names; use --clips for other clips")
     p.add_argument("--clips", nargs="+", default=None, metavar="CLIP",
                    help="evaluate on these clips (files, folders or embedded:lift_carry), retargeted as in training")
     p.add_argument("--suite", default="default", choices=("nominal", "default", "robust"),
