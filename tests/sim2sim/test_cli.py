@@ -78,3 +78,26 @@ def test_user_errors_are_one_line(cli, tmp_path, exported_policy):
         lines = result.stderr.strip().splitlines()
         assert len(lines) == 1 and lines[0].startswith("robot-hoi sim2sim: error:"), result.stderr
         assert message in lines[0]
+
+
+def test_min_success_gate_and_crashed_episodes_set_the_exit_code(monkeypatch, tmp_path, capsys):
+    import argparse
+
+    import sim2sim.evaluate as evaluate_module
+    from sim2sim import cli as sim2sim_cli
+
+    def fake_report(rate, errors=()):
+        cell = {"policy": "A", "clip": "c", "perturbation": "nominal", "success_rate": rate, "errors": list(errors),
+                "E_h_cm": {"mean": 3.0}}
+        timing = {"simulated_s": 1.0, "wall_s": 1.0, "workers": 1, "realtime_factor_per_episode": 1.0,
+                  "realtime_factor_per_cpu_second": 1.0}
+        report = {"policies": [{"label": "A"}], "cells": [cell], "videos": [], "timing": timing}
+        return report, {"html": tmp_path / "r.html", "metrics": tmp_path / "m.json", "summary": tmp_path / "s.md"}
+
+    parser = argparse.ArgumentParser()
+    sim2sim_cli.register(parser.add_subparsers())
+    args = parser.parse_args(["sim2sim", "--policy", "p.onnx", "--min-success", "0.8"])
+    for rate, errors, code in ((0.9, (), 0), (0.5, (), 1), (1.0, ("RuntimeError: boom",), 1)):
+        monkeypatch.setattr(evaluate_module, "evaluate", lambda options, r=rate, e=errors: fake_report(r, e))
+        assert args.func(args) == code, (rate, errors)
+    assert "crashed" in capsys.readouterr().err
