@@ -11,9 +11,11 @@ against it is honest; pass pace=False to answer as fast as possible.
 
 Fault injection applies to the next replies in the order it was asked for: drop_next, corrupt_checksum_next,
 garble_next, partial_next, noise_before_next (noise then a good reply: the host must resync) and, for CAN,
-error_frame_next; refuse_writes_next answers writes with a refusal, and set_error_bits sets ERROR bits. On CAN there is no software checksum, so corrupt_checksum_next sends an error frame in place
-of the reply (what a CRC error looks like to the host), garble_next a reply of the wrong length and
-partial_next a reply cut short.
+error_frame_next. On CAN every reply frame counts (a 12-byte read is 2 replies); there is no software
+checksum there, so corrupt_checksum_next sends an error frame in place of the reply (what a CRC error looks
+like to the host), garble_next a reply of the wrong length and partial_next one cut short.
+refuse_writes_next answers the next writes with a refusal; set_error_bits sets ERROR bits in the model;
+disconnect()/reconnect() unplug and replug the hand.
 """
 
 from __future__ import annotations
@@ -32,7 +34,6 @@ from deploy.hands.sim_registers import DeviceRegisters, WriteRecord
 
 log = logging.getLogger("deploy.hands.simulated")
 
-FAULTS = ("drop", "checksum", "garble", "partial", "noise", "error_frame")
 POLL_S = 0.02  # how long the device thread waits for input before checking for stop()
 
 

@@ -225,3 +225,17 @@ def test_replies_are_paced_at_the_line_rate(hand_rig):
     wire = 5 * (9 + 20 + 9 + 20 + 9 + 26) * 10 / 115200  # three reads per state, request + reply bytes
     assert elapsed >= wire * 0.99
     assert sim.wire_bits >= 5 * (9 + 20 + 9 + 20 + 9 + 26) * 10
+
+
+def test_rate_bench_runs_and_ends_with_its_summary_line(capsys):
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[3] / "bench" / "hand_bus_rate.py"
+    spec = importlib.util.spec_from_file_location("hand_bus_rate", path)
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    assert bench.main(["--seconds", "0.1", "--repeats", "1", "--transports", "serial", "can"]) == 0
+    lines = capsys.readouterr().out.strip().splitlines()
+    ratio = float(lines[-1].removeprefix("hand_bus_rate: "))
+    assert lines[-1].startswith("hand_bus_rate: ") and 0.0 < ratio <= 1.0  # paced hands: never beats the line
