@@ -1,0 +1,55 @@
+"""A teacher learns on the embedded clip: after a short, seeded PPO run (100 iterations x 64 envs x 32 steps,
+~4 min on 2 cores) its deterministic policy earns a clearly larger return than the freshly initialised policy from
+the same start states, and keeps episodes at least as long.
+
+Measured when this test was written: return 2.39 -> 3.29 (x1.38), duration 0.93 -> 0.98 s, E_h 11.1 -> 10.7 cm.
+A fresh policy's mean is already the PD replay of the retargeted reference (residual actions), so the budget buys
+corrections on top of a reasonable baseline; longer episodes need balance learning beyond this budget (closing
+notes). The test can fail: with learning broken (e.g. a sign flip in the surrogate) the return does not rise.
+"""
+
+import pytest
+import torch
+
+from robot_hoi.data.synth import default_clip
+from robot_hoi.embodiment import load_embodiment
+from robot_hoi.rl.budget import Budget
+from robot_hoi.rl.config import FAST_PPO_CONFIG, load_train_config
+from robot_hoi.rl.eval_cli import evaluate
+from robot_hoi.rl.models import ActorCritic
+from robot_hoi.rl.runner import OnPolicyRunner
+from robot_hoi.tasks.interaction import factory
+from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg
+
+ITERATIONS = 100
+NUM_ENVS = 64
+
+
+def _env(clip, embodiment, seed, cache, psi=True):
+    cfg = InteractionEnvCfg(num_envs=NUM_ENVS, nthread=2, seed=seed)
+    cfg.psi.enabled = psi
+    return factory.make_env([clip], cfg, embodiment, cache=cache)
+
+
+@pytest.mark.slow
+def test_teacher_beats_untrained_policy(tmp_path):
+    torch.set_num_threads(1)
+    embodiment = load_embodiment("g1_inspire")
+    clip = default_clip()
+    cache = tmp_path / "references"
+    train_cfg = load_train_config(FAST_PPO_CONFIG, ["runner.progress=false", "runner.tensorboard=false", "seed=7"])
+
+    env = _env(clip, embodiment, seed=7, cache=cache)
+    runner = OnPolicyRunner(env, train_cfg, tmp_path / "run")
+    untrained = ActorCritic(env.obs_dims["policy"], env.obs_dims["critic"], env.num_actions, train_cfg.model)
+    untrained.load_state_dict(runner.model.state_dict())  # the exact initial policy
+    untrained.eval()
+    runner.learn(Budget(iterations=ITERATIONS))
+    runner.model.eval()
+
+    # identical reference starts for both (PSI off, same env seed)
+    before = evaluate(_env(clip, embodiment, seed=123, cache=cache, psi=False), untrained)
+    after = evaluate(_env(clip, embodiment, seed=123, cache=cache, psi=False), runner.model)
+    print(f"untrained {before}\ntrained   {after}")
+    assert after["return"] > 1.2 * before["return"]
+    assert after["duration_s"] >= before["duration_s"]
