@@ -7,11 +7,12 @@ reported as an error record with its traceback instead of ending the whole run.
 
 from __future__ import annotations
 
+import logging
 import multiprocessing
 import os
 import time
 import traceback
-from collections.abc import Callable, Iterable
+from collections.abc import Callable
 
 from sim2sim.episode import EpisodeJob, run_episode
 
@@ -33,8 +34,6 @@ def run_one(job: EpisodeJob) -> dict:
 
 
 def _init_worker() -> None:
-    import logging
-
     logging.basicConfig(level=logging.ERROR)
     os.environ.setdefault("OMP_NUM_THREADS", "1")
 
@@ -44,13 +43,18 @@ def run_jobs(jobs: list[EpisodeJob], workers: int, progress: Callable[[dict], No
     wall0 = time.perf_counter()
     workers = max(1, min(workers, len(jobs)))
     results: list[dict | None] = [None] * len(jobs)
-    indexed: Iterable[tuple[int, dict]]
     if workers == 1:
-        indexed = ((i, run_one(job)) for i, job in enumerate(jobs))
-        for i, result in indexed:
-            results[i] = result
-            if progress:
-                progress(result)
+        # the runtime logs every fault and overrun as a warning; the report has them, so keep the terminal quiet
+        deploy_log = logging.getLogger("deploy")
+        level = deploy_log.level
+        deploy_log.setLevel(logging.ERROR)
+        try:
+            for i, job in enumerate(jobs):
+                results[i] = run_one(job)
+                if progress:
+                    progress(results[i])
+        finally:
+            deploy_log.setLevel(level)
     else:
         ctx = multiprocessing.get_context("spawn")
         with ctx.Pool(workers, initializer=_init_worker) as pool:
