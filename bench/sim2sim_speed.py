@@ -13,7 +13,10 @@ and the run; not process start-up):
              runs on it (on an idle machine wall and CPU agree).
 The last line, `sim2sim_realtime_factor_per_core: <value>` (goal: >= 20), is the CPU figure, so that it does
 not depend on who else is using the machine; the wall figure is printed above it.
-Without --policy an untrained deployable policy is exported first (robot-hoi export onnx --untrained).
+Without --policy the bench exports an untrained deployable policy (robot-hoi export onnx --untrained) and runs
+a policy with its contract and reference whose actions are 0 with fixed offsets: the robot holds its default
+stand for the whole clip (a flailing untrained policy falls and lies in contact with the floor, which is
+neither representative nor repeatable).
 """
 
 from __future__ import annotations
@@ -26,6 +29,25 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+
+def standing_policy(exported: Path) -> Path:
+    """A policy file with the exported contract and reference whose targets are always the default pose."""
+    import json
+
+    import numpy as np
+    import onnx
+
+    from deploy.contract import PolicyContract
+    from deploy.devpolicy import onnx_bytes
+
+    contract = PolicyContract.from_onnx(exported)
+    metadata = {p.key: p.value for p in onnx.load(str(exported)).metadata_props}
+    metadata["action_offset_mode"] = json.dumps("fixed")
+    path = exported.with_name("stand.onnx")
+    weights = np.zeros((contract.obs_dim, contract.num_actions), np.float32)
+    path.write_bytes(onnx_bytes(metadata, weights, np.zeros(contract.num_actions, np.float32)))
+    return path
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -50,9 +72,10 @@ def main(argv: list[str] | None = None) -> int:
     with tempfile.TemporaryDirectory() as tmp:
         policy = args.policy
         if policy is None:
-            policy = str(Path(tmp) / "untrained.onnx")
-            if robot_hoi_main(["export", "onnx", "--untrained", "-o", policy]) != 0:
+            exported = Path(tmp) / "untrained.onnx"
+            if robot_hoi_main(["export", "onnx", "--untrained", "-o", str(exported)]) != 0:
                 return 1
+            policy = str(standing_policy(exported))
         contract = PolicyContract.from_onnx(policy)
         target = policy_targets(contract, None, "g1_inspire", True)[0]
         frames = None if args.seconds is None else int(args.seconds * target.motion.fps)
