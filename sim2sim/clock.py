@@ -20,6 +20,10 @@ class SimClock:
         self.physics_wall_s = 0.0
         self._awake_since = time.perf_counter()
 
+    def mark_awake(self) -> None:
+        """The loop starts now: the first tick's wall time is counted from here."""
+        self._awake_since = time.perf_counter()
+
     def now(self) -> float:
         return self.world.t
 

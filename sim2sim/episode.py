@@ -109,7 +109,7 @@ def run_episode(job: EpisodeJob) -> dict:
     if key not in _TRACKS:  # a worker runs many episodes of the same clip
         _TRACKS[key] = ReferenceTrack.build(motion, target.object_points, target.hand_contact)
     ref = _TRACKS[key]
-    warmup = int(getattr(contract, "warmup_frames", 0))
+    warmup = contract.warmup_frames
     monitor = EpisodeMonitor(world, ref, job.thresholds, last_frame, keep_qpos=job.keep_traces,
                              warmup_frames=warmup)
     hands = SimulatedInspireHands(world, contract, clock, transport=job.hand_transport, link=job.hand_link,
@@ -124,7 +124,7 @@ def run_episode(job: EpisodeJob) -> dict:
         monitor.attach(runtime)
         pre_policy = safety.zero_torque_s + safety.ramp_s + safety.auto_start_after_s + 0.5
         run_wall0, run_cpu0 = time.perf_counter(), time.process_time()
-        clock._awake_since = run_wall0
+        clock.mark_awake()
         summary = runtime.run(duration_s=pre_policy + (last_frame + warmup) / motion.fps + 2.0)
         run_wall, run_cpu = time.perf_counter() - run_wall0, time.process_time() - run_cpu0
     finally:
