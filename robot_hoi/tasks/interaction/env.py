@@ -20,7 +20,7 @@ from robot_hoi.tasks.interaction.mdp import terminations as term_terms
 from robot_hoi.tasks.interaction.psi import PsiBuffer
 from robot_hoi.tasks.interaction.reference import ReferenceMotion, nearest_surface_vectors
 from robot_hoi.tasks.interaction.scene_setup import InteractionScene
-from robot_hoi.utils.torch_rot import quat_apply, quat_apply_inverse, quat_mul, yaw_quat
+from robot_hoi.utils.torch_rot import quat_apply, quat_apply_inverse, quat_mul, quat_to_matrix, yaw_quat
 
 
 @dataclass
@@ -35,6 +35,9 @@ class ReferenceFrame:
     root_pos: Tensor
     root_quat_wxyz: Tensor
     joint_pos: Tensor
+    link_rotmat: Tensor
+    object_rotmat: Tensor
+    root_rotmat: Tensor
 
 
 @dataclass
@@ -106,6 +109,10 @@ class InteractionEnv:
         self.ref_object_lin_vel, self.ref_object_ang_vel = cat("object_lin_vel"), cat("object_ang_vel")
         self.ref_robot_qpos, self.ref_robot_qvel = cat("robot_qpos"), cat("robot_qvel")
         self.ref_joint_pos = cat("joint_pos")
+        # rotation matrices of the whole reference, computed once (the observation terms use matrices)
+        self.ref_link_rotmat = quat_to_matrix(self.ref_link_quat)
+        self.ref_object_rotmat = quat_to_matrix(self.ref_object_quat)
+        self.ref_root_rotmat = quat_to_matrix(self.ref_robot_qpos[:, 3:7])
         lengths = torch.tensor([r.num_frames for r in references])
         self.clip_start = torch.cumsum(lengths, 0) - lengths
         self.clip_end = self.clip_start + lengths - 1
@@ -194,9 +201,13 @@ class InteractionEnv:
         self.object_quat = qpos[:, lay.object_qpos + 3:lay.object_qpos + 7]
         self.object_lin_vel = qvel[:, lay.object_dof:lay.object_dof + 3]
         # free-joint angular velocity is in the body frame; the observation wants it in world axes
-        self.object_ang_vel = quat_apply(self.object_quat, qvel[:, lay.object_dof + 3:lay.object_dof + 6])
+        self.object_rotmat = quat_to_matrix(self.object_quat)
+        self.object_ang_vel = (self.object_rotmat @ qvel[:, lay.object_dof + 3:lay.object_dof + 6, None])[..., 0]
         self.link_pos = sens[:, lay.link_pos].reshape(n, nl, 3)
         self.link_quat = sens[:, lay.link_quat].reshape(n, nl, 4)
+        self.link_rotmat = quat_to_matrix(self.link_quat)
+        self.root_rotmat = quat_to_matrix(self.root_quat)
+        self.heading_matrix = quat_to_matrix(yaw_quat(self.root_quat))
         self.link_vel = sens[:, lay.link_vel].reshape(n, nl, 3)
         contact = sens[:, lay.contact].reshape(n, -1, 4)
         self.contact_found = contact[..., 0] > 0
@@ -207,11 +218,11 @@ class InteractionEnv:
         self.object_acc = (self.object_lin_vel - self.prev_object_vel) / self.dt
         self.prev_link_vel, self.prev_object_vel = self.link_vel, self.object_lin_vel
 
-        self.object_points_world = quat_apply(self.object_quat[:, None], self.object_points[None]) + \
-            self.object_pos[:, None]
+        # surface samples in world: p R^T + o (row vectors)
+        self.object_points_world = self.object_points @ self.object_rotmat.transpose(-1, -2) + self.object_pos[:, None]
         self.d = nearest_surface_vectors(self.link_pos, self.object_points_world)
         self.ref = self.reference_at(0)
-        self.ref_object_points_world = quat_apply(self.ref.object_quat_wxyz[:, None], self.object_points[None]) + \
+        self.ref_object_points_world = self.object_points @ self.ref.object_rotmat.transpose(-1, -2) + \
             self.ref.object_pos[:, None]
         self.w_d = reward_terms.interaction_weights(self.d, self.ref.d_hat)
         need = self.ref.hand_contact & (self.warmup_left == 0)[:, None]
@@ -227,7 +238,8 @@ class InteractionEnv:
             object_pos=self.ref_object_pos[idx], object_quat_wxyz=self.ref_object_quat[idx],
             hand_contact=self.ref_hand_contact[idx], hand_distance=self.ref_hand_distance[idx],
             root_pos=self.ref_robot_qpos[idx, 0:3], root_quat_wxyz=self.ref_robot_qpos[idx, 3:7],
-            joint_pos=self.ref_joint_pos[idx],
+            joint_pos=self.ref_joint_pos[idx], link_rotmat=self.ref_link_rotmat[idx],
+            object_rotmat=self.ref_object_rotmat[idx], root_rotmat=self.ref_root_rotmat[idx],
         )
 
     def _terminations(self) -> dict[str, Tensor]:

@@ -10,30 +10,32 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
-from robot_hoi.utils.torch_rot import (
-    quat_apply_inverse,
-    quat_conj,
-    quat_mul,
-    quat_to_tan_norm,
-    yaw_quat,
-)
+from robot_hoi.utils.torch_rot import quat_apply_inverse
 
-
-def _heading(env) -> Tensor:
-    return yaw_quat(env.root_quat)
+# Rotations arrive as matrices the env computes once per step (env.heading_matrix H = Rz(yaw of the pelvis),
+# env.*_rotmat, reference.*_rotmat): every term below is then a few batched matmuls.
 
 
 def _to_heading(env, vec: Tensor) -> Tensor:
-    """World vectors (N, ..., 3) into the heading frame."""
-    heading = _heading(env)
-    shape = (heading.shape[0],) + (1,) * (vec.dim() - 2) + (4,)
-    return quat_apply_inverse(heading.reshape(shape), vec)
+    """World vectors (N, ..., 3) into the heading frame: H^T v (row form v^T H)."""
+    n = vec.shape[0]
+    return (vec.reshape(n, -1, 3) @ env.heading_matrix).reshape(vec.shape)
 
 
-def _rot_in_heading(env, quat: Tensor) -> Tensor:
-    heading = _heading(env)
-    shape = (heading.shape[0],) + (1,) * (quat.dim() - 2) + (4,)
-    return quat_to_tan_norm(quat_mul(quat_conj(heading.reshape(shape)).expand_as(quat), quat))
+def _rot6(matrix: Tensor) -> Tensor:
+    """rot6(M) = first two columns, column-major: [M00, M10, M20, M01, M11, M21]."""
+    return matrix[..., :, :2].transpose(-1, -2).reshape(*matrix.shape[:-2], 6)
+
+
+def _rot_in_heading(env, rotmat: Tensor) -> Tensor:
+    """rot6(H^T R) for rotation matrices (N, ..., 3, 3)."""
+    heading = env.heading_matrix.reshape((rotmat.shape[0],) + (1,) * (rotmat.dim() - 3) + (3, 3))
+    return _rot6(heading.transpose(-1, -2) @ rotmat)
+
+
+def _relative_rot6(rot_a: Tensor, rot_b: Tensor) -> Tensor:
+    """rot6(R_a^T R_b): the rotation from a to b, in a's frame (theta_hat (-) theta of Eq. 1)."""
+    return _rot6(rot_a.transpose(-1, -2) @ rot_b)
 
 
 def _flat(x: Tensor) -> Tensor:
@@ -46,7 +48,7 @@ def root_height(env) -> Tensor:
 
 
 def root_rotation(env) -> Tensor:
-    return _rot_in_heading(env, env.root_quat)
+    return _rot_in_heading(env, env.root_rotmat)
 
 
 def root_linear_velocity(env) -> Tensor:
@@ -70,7 +72,7 @@ def link_positions(env) -> Tensor:
 
 
 def link_rotations(env) -> Tensor:
-    return _flat(_rot_in_heading(env, env.link_quat))
+    return _flat(_rot_in_heading(env, env.link_rotmat))
 
 
 def link_velocities(env, scale: float = 0.1) -> Tensor:
@@ -80,7 +82,7 @@ def link_velocities(env, scale: float = 0.1) -> Tensor:
 def object_state(env) -> Tensor:
     return torch.cat([
         _to_heading(env, env.object_pos - env.root_pos),
-        _rot_in_heading(env, env.object_quat),
+        _rot_in_heading(env, env.object_rotmat),
         _to_heading(env, env.object_lin_vel),
         _to_heading(env, env.object_ang_vel),
     ], dim=-1)
@@ -106,18 +108,16 @@ def warmup_phase(env) -> Tensor:
 def reference_goal(env, k: int) -> Tensor:
     """s^g_{t,t+k}: differences to the reference at t+k and the reference's absolute values (heading frame)."""
     ref = env.reference_at(k)
-    link_rot_diff = quat_to_tan_norm(quat_mul(quat_conj(env.link_quat), ref.link_quat_wxyz))
-    obj_rot_diff = quat_to_tan_norm(quat_mul(quat_conj(env.object_quat), ref.object_quat_wxyz))
     return torch.cat([
-        _flat(link_rot_diff),
+        _flat(_relative_rot6(env.link_rotmat, ref.link_rotmat)),
         _flat(_to_heading(env, ref.link_pos - env.link_pos)),
-        obj_rot_diff,
+        _relative_rot6(env.object_rotmat, ref.object_rotmat),
         _to_heading(env, ref.object_pos - env.object_pos),
         _flat(_to_heading(env, ref.d_hat - env.d)),
         ref.hand_contact.float() - env.hand_contact_found.float(),
-        _flat(_rot_in_heading(env, ref.link_quat_wxyz)),
+        _flat(_rot_in_heading(env, ref.link_rotmat)),
         _flat(_to_heading(env, ref.link_pos - env.root_pos[:, None])),
-        _rot_in_heading(env, ref.object_quat_wxyz),
+        _rot_in_heading(env, ref.object_rotmat),
         _to_heading(env, ref.object_pos - env.root_pos),
     ], dim=-1)
 
@@ -187,7 +187,7 @@ def object_pos(env) -> Tensor:
 
 
 def object_rot(env) -> Tensor:
-    return _rot_in_heading(env, env.object_quat)
+    return _rot_in_heading(env, env.object_rotmat)
 
 
 def _keyframe_stack(env, fn) -> Tensor:
@@ -199,7 +199,7 @@ def ref_root_pos(env) -> Tensor:
 
 
 def ref_root_rot(env) -> Tensor:
-    return _keyframe_stack(env, lambda ref: _rot_in_heading(env, ref.root_quat_wxyz))
+    return _keyframe_stack(env, lambda ref: _rot_in_heading(env, ref.root_rotmat))
 
 
 def ref_joint_pos(env) -> Tensor:
@@ -215,7 +215,7 @@ def ref_object_pos(env) -> Tensor:
 
 
 def ref_object_rot(env) -> Tensor:
-    return _keyframe_stack(env, lambda ref: _rot_in_heading(env, ref.object_quat_wxyz))
+    return _keyframe_stack(env, lambda ref: _rot_in_heading(env, ref.object_rotmat))
 
 
 STUDENT_TERMS = {
