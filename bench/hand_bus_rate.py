@@ -30,6 +30,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from deploy.errors import HandLinkError  # noqa: E402
 from deploy.hands import make_hand_bus  # noqa: E402
 from deploy.hands.simulated import start_simulated_hand  # noqa: E402
 
@@ -49,24 +50,29 @@ def start_pair(transport: str, baudrate: int):
     return sims, buses
 
 
-def run_repeat(sims, buses, seconds: float) -> tuple[float, float, float]:
-    """(cycles per second, line-limited cycles per second, simulator lag per cycle) over one timed window."""
+def run_repeat(sims, buses, seconds: float) -> tuple[float, float, float, int]:
+    """(good cycles per second, line-limited cycles per second, simulator lag per cycle, failed cycles) over
+    one timed window. A cycle that ends in HandLinkError (every try timed out) still spends its time."""
     bits0 = [sim.wire_bits for sim in sims]
     late0 = sum(sim.late_s for sim in sims)
-    cycles = 0
+    cycles = failed = 0
     start = time.perf_counter()
     while True:
-        phase = 2 * math.pi * cycles / 50.0
+        phase = 2 * math.pi * (cycles + failed) / 50.0
         target = [int(500 + 400 * math.sin(phase + k)) for k in range(6)]
-        for bus in buses:
-            bus.write_angles(target)
-            bus.read_state()
-        cycles += 1
+        try:
+            for bus in buses:
+                bus.write_angles(target)
+                bus.read_state()
+            cycles += 1
+        except HandLinkError:
+            failed += 1
         elapsed = time.perf_counter() - start
         if elapsed >= seconds:
             break
     wire_s = sum((sim.wire_bits - b0) / sim.line_rate for sim, b0 in zip(sims, bits0, strict=True))
-    return cycles / elapsed, cycles / wire_s, (sum(sim.late_s for sim in sims) - late0) / cycles
+    total = cycles + failed
+    return cycles / elapsed, total / wire_s, (sum(sim.late_s for sim in sims) - late0) / total, failed
 
 
 def bench_transport(transport: str, seconds: float, repeats: int, baudrate: int) -> dict:
@@ -76,25 +82,25 @@ def bench_transport(transport: str, seconds: float, repeats: int, baudrate: int)
             for _ in range(5):
                 bus.write_angles([500] * 6)
                 bus.read_state()
-        bits0 = sum(sim.wire_bits for sim in sims)
         runs = [run_repeat(sims, buses, seconds) for _ in range(repeats)]
-        bits_per_cycle = (sum(sim.wire_bits for sim in sims) - bits0) / sum(r * seconds for r, _, _ in runs)
+        line_rate = sims[0].line_rate
         failures = sum(sum(bus.stats.failures.values()) for bus in buses)
     finally:
         for bus in buses:
             bus.disconnect()
         for sim in sims:
             sim.stop()
-    ratios = [rate / limit for rate, limit, _ in runs]
+    ratios = [rate / limit for rate, limit, _, _ in runs]
     return {
         "transport": transport,
-        "rate": statistics.median(r for r, _, _ in runs),
-        "limit": statistics.median(limit for _, limit, _ in runs),
-        "sim_lag_ms": 1e3 * statistics.median(lag for _, _, lag in runs),
+        "rate": statistics.median(r for r, _, _, _ in runs),
+        "limit": statistics.median(limit for _, limit, _, _ in runs),
+        "sim_lag_ms": 1e3 * statistics.median(lag for _, _, lag, _ in runs),
+        "failed_cycles": sum(f for _, _, _, f in runs),
         "ratio": statistics.median(ratios),
         "ratio_min": min(ratios),
         "ratio_max": max(ratios),
-        "bits_per_cycle": bits_per_cycle,
+        "bits_per_cycle": line_rate / statistics.median(limit for _, limit, _, _ in runs),
         "line": f"{baudrate} baud 8N1" if transport != "can" else "1 Mbit/s CAN",
         "failures": failures,
     }
@@ -117,7 +123,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     print(
         f"{'transport':<9} {'line':<20} {'bytes/cycle':>11} {'line limit':>11} {'measured':>10} "
-        f"{'ratio':>6} {'(min..max)':>12} {'sim lag/cycle':>13} {'failed tries':>12}"
+        f"{'ratio':>6} {'(min..max)':>12} {'sim lag/cycle':>13} {'failed tries':>12} {'failed cycles':>13}"
     )
     results = []
     for transport in args.transports:
@@ -126,7 +132,7 @@ def main(argv: list[str] | None = None) -> int:
         size = f"{r['bits_per_cycle'] / 10:.0f} B" if transport != "can" else f"{r['bits_per_cycle']:.0f} bit"
         print(
             f"{transport:<9} {r['line']:<20} {size:>11} {r['limit']:>8.1f} Hz {r['rate']:>7.1f} Hz "
-            f"{r['ratio']:>6.3f} {r['ratio_min']:>5.3f}..{r['ratio_max']:<5.3f} {r['sim_lag_ms']:>10.3f} ms {r['failures']:>12d}"
+            f"{r['ratio']:>6.3f} {r['ratio_min']:>5.3f}..{r['ratio_max']:<5.3f} {r['sim_lag_ms']:>10.3f} ms {r['failures']:>12d} {r['failed_cycles']:>13d}"
         )
     print(f"hand_bus_rate: {min(r['ratio'] for r in results):.3f}")
     return 0

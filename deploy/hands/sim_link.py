@@ -45,6 +45,12 @@ class LineClock:
             self._free_at = start + duration_s
             return self._free_at
 
+    def busy_until(self, t: float) -> None:
+        """A transmission really ended at `t` (later than booked): nothing else can finish on the wire before
+        t plus its own duration, so a late reply is never followed by an impossibly fast one."""
+        with self._lock:
+            self._free_at = max(self._free_at, t)
+
 
 class PtyLink:
     """Device end of a pseudo-terminal pair, reachable by the host under a stable symlink path.

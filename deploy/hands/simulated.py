@@ -200,7 +200,10 @@ class SimulatedHand:
         else:
             return
         sleep_until(deadline)
-        self.late_s += time.monotonic() - deadline  # > 0 when this thread was not scheduled in time
+        late = time.monotonic() - deadline  # > 0 when this thread was not scheduled in time
+        if late > 0:
+            self.late_s += late
+            self.clock.busy_until(deadline + late)
 
     def _noise(self, n: int, avoid: bytes) -> bytes:
         """Random bytes without any byte of `avoid`, so noise never contains a frame start by accident."""

@@ -15,6 +15,8 @@ def test_line_clock_serialises_bookings():
     assert clock.book(10.0, 1.0) == 11.0
     assert clock.book(10.5, 1.0) == 12.0  # the wire was still busy: queued behind the first booking
     assert clock.book(20.0, 0.5) == 20.5  # idle wire: starts when asked
+    clock.busy_until(21.0)  # that reply really went out at 21.0
+    assert clock.book(20.6, 0.5) == 21.5
 
 
 def test_sleep_until_is_not_early():
