@@ -146,7 +146,7 @@ def test_vendor_parser_never_crashes_and_never_accepts_a_bad_checksum(raw):
         assert found  # frames in header-free noise are always found
 
 
-@settings(max_examples=300, deadline=None)
+@settings(max_examples=300, deadline=None, database=None)
 @given(
     st.lists(st.tuples(st.binary(max_size=10), st.binary(min_size=1, max_size=24)), min_size=1, max_size=5)
 )
