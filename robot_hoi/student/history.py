@@ -19,6 +19,7 @@ from torch import Tensor, nn
 
 from robot_hoi.student.config import SkillMimicConfig
 from robot_hoi.tasks.interaction.mdp import observations as obs_terms
+from robot_hoi.utils.torch_rot import quat_to_matrix, yaw_quat
 
 HISTORY_TERMS = ("projected_gravity", "base_ang_vel", "joint_pos", "joint_vel", "object_pos", "object_rot")
 
@@ -38,11 +39,14 @@ def reference_features(env, reference) -> Tensor:
     lay = env.layout
     qpos, qvel = reference.robot_qpos, reference.robot_qvel
     frames = qpos.shape[0]
-    state = SimpleNamespace(
-        num_envs=frames, root_pos=qpos[:, 0:3], root_quat=qpos[:, 3:7], root_ang_vel=qvel[:, 3:6],
+    root_quat = qpos[:, 3:7]
+    state = SimpleNamespace(  # the state attributes the terms read, as InteractionEnv._update_state sets them
+        num_envs=frames, root_pos=qpos[:, 0:3], root_quat=root_quat, root_ang_vel=qvel[:, 3:6],
+        root_rotmat=quat_to_matrix(root_quat), heading_matrix=quat_to_matrix(yaw_quat(root_quat)),
         joint_pos=reference.joint_pos, default_joint_pos=env.default_joint_pos,
         joint_vel=qvel[:, torch.as_tensor(lay.actuator_dof)], body_actuator_ids=env.body_actuator_ids,
-        object_pos=reference.object_pos, object_quat=reference.object_quat_wxyz)
+        object_pos=reference.object_pos, object_quat=reference.object_quat_wxyz,
+        object_rotmat=quat_to_matrix(reference.object_quat_wxyz))
     return torch.cat([obs_terms.STUDENT_TERMS[name](state) for name in HISTORY_TERMS], dim=-1)
 
 

@@ -170,7 +170,7 @@ def build_student(setup: Setup, args: argparse.Namespace):
                         f"(distill.reference_min_frames = {cfg.distill.reference_min_frames}); train the teachers "
                         "longer, or use --set distill.reference=mocap")
     env = InteractionEnv(setup.env_cfg, setup.scene, [distilled[i][0] for i in keep])
-    timeline = ReferenceTimeline([setup.mocap[i] for i in keep], env.layout.link_names)
+    timeline = ReferenceTimeline([setup.mocap[i] for i in keep], env)
     view = ReferenceView(env, timeline, setup.teacher_env_cfg.keyframes, setup.teacher_env_cfg.warmup_frames)
     for member in setup.members:
         member.view = view

@@ -14,36 +14,36 @@ from types import SimpleNamespace
 import torch
 from torch import Tensor
 
-from robot_hoi.tasks.interaction.env import ReferenceFrame
+from robot_hoi.tasks.interaction.env import InteractionEnv, ReferenceFrame
 from robot_hoi.tasks.interaction.mdp import observations as obs_terms
 from robot_hoi.tasks.interaction.reference import ReferenceMotion
 
-WRIST_LINKS = ("left_wrist_yaw_link", "right_wrist_yaw_link")
-
 
 class ReferenceTimeline:
-    """Reference motions concatenated as the env does (clip c covers frames start[c] .. end[c])."""
+    """Reference motions laid out exactly as InteractionEnv lays out its own (its _setup_references: the same
+    ref_* tensors, clip c covering frames clip_start[c] .. clip_end[c]), so the env's reference_at reads them."""
 
-    def __init__(self, references: list[ReferenceMotion], link_names: list[str]) -> None:
-        cat = lambda name: torch.cat([getattr(r, name) for r in references])  # noqa: E731
-        self.link_pos, self.link_quat = cat("link_pos"), cat("link_quat_wxyz")
-        self.d_hat, self.hand_contact = cat("d_hat"), cat("hand_contact")
-        self.object_pos, self.object_quat = cat("object_pos"), cat("object_quat_wxyz")
-        self.robot_qpos, self.joint_pos = cat("robot_qpos"), cat("joint_pos")
-        lengths = torch.tensor([r.num_frames for r in references])
-        self.start = torch.cumsum(lengths, 0) - lengths
-        self.end = self.start + lengths - 1
-        wrists = [link_names.index(n) for n in WRIST_LINKS]
-        self.hand_distance = self.d_hat[:, wrists].norm(dim=-1)
+    def __init__(self, references: list[ReferenceMotion], env) -> None:
+        holder = SimpleNamespace(cfg=env.cfg, layout=env.layout)
+        InteractionEnv._setup_references(holder, references)
+        self.tensors = vars(holder)
 
-    def frame(self, idx: Tensor) -> ReferenceFrame:
-        return ReferenceFrame(
-            link_pos=self.link_pos[idx], link_quat_wxyz=self.link_quat[idx], d_hat=self.d_hat[idx],
-            object_pos=self.object_pos[idx], object_quat_wxyz=self.object_quat[idx],
-            hand_contact=self.hand_contact[idx], hand_distance=self.hand_distance[idx],
-            root_pos=self.robot_qpos[idx, 0:3], root_quat_wxyz=self.robot_qpos[idx, 3:7],
-            joint_pos=self.joint_pos[idx],
-        )
+    @property
+    def start(self) -> Tensor:
+        return self.tensors["clip_start"]
+
+    @property
+    def end(self) -> Tensor:
+        return self.tensors["clip_end"]
+
+    @property
+    def joint_pos(self) -> Tensor:
+        return self.tensors["ref_joint_pos"]
+
+    def frame(self, idx: Tensor, end: Tensor) -> ReferenceFrame:
+        """The env's ReferenceFrame at timeline frames `idx` (InteractionEnv.reference_at on this timeline)."""
+        clock = SimpleNamespace(**self.tensors, ref_index=idx, _clip_end=lambda: end)
+        return InteractionEnv.reference_at(clock, 0)
 
 
 class ReferenceView:
@@ -66,10 +66,8 @@ class ReferenceView:
         return torch.minimum(start + offset.clamp(min=0), end)
 
     def reference_at(self, k: int) -> ReferenceFrame:
-        idx = self.index()
-        if k:
-            idx = torch.minimum(idx + k, self._timeline.end[self._env.clip_id])
-        return self._timeline.frame(idx)
+        end = self._timeline.end[self._env.clip_id]
+        return self._timeline.frame(torch.minimum(self.index() + k, end), end)
 
     def action_offset(self, mode: str) -> Tensor:
         """The PD target of a zero action for a policy trained with env.action_offset `mode` on this timeline:

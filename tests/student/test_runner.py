@@ -27,7 +27,7 @@ def build(scene, overrides=(), log_dir=None, num_envs=4):
     cfg, _ = load_student_config(STUDENT_FAST_CONFIG, overrides=[*TINY, *overrides])
     env = make_env(scene, [make_reference(scene, 40, drift=0.005)], num_envs=num_envs)
     teacher = tiny_teacher(env)
-    view = ReferenceView(env, ReferenceTimeline(env.references, env.layout.link_names), env.cfg.keyframes,
+    view = ReferenceView(env, ReferenceTimeline(env.references, env), env.cfg.keyframes,
                          env.cfg.warmup_frames)
     composite = CompositeTeacher([TeacherMember("t", teacher, None, view=view)], [0])
     memory = MemoryWriter()

@@ -13,7 +13,7 @@ def test_view_on_the_env_reference_reproduces_the_policy_group(scene):
     env = make_env(scene, [make_reference(scene, drift=0.01)])
     for _ in range(3):
         obs, *_ = env.step(0.2 * torch.randn(env.num_envs, env.num_actions))
-    view = ReferenceView(env, ReferenceTimeline(env.references, env.layout.link_names), env.cfg.keyframes,
+    view = ReferenceView(env, ReferenceTimeline(env.references, env), env.cfg.keyframes,
                          env.cfg.warmup_frames)
     assert torch.equal(view.teacher_observation(), obs["policy"])
     assert torch.equal(view.action_offset("reference"), env.action_offset())
@@ -25,7 +25,7 @@ def test_view_reads_another_reference_as_an_env_built_on_it_would(scene):
     env = make_env(scene, [student_ref])
     for _ in range(4):
         env.step(0.2 * torch.randn(env.num_envs, env.num_actions))
-    view = ReferenceView(env, ReferenceTimeline([teacher_ref], env.layout.link_names), env.cfg.keyframes,
+    view = ReferenceView(env, ReferenceTimeline([teacher_ref], env), env.cfg.keyframes,
                          env.cfg.warmup_frames)
     # the same simulated state (set in both, so sensors are computed from it alike) in an env on the teacher's
     # reference
@@ -60,7 +60,7 @@ def test_routing_by_clip_and_action_reparametrisation(scene):
         ref.joint_pos = ref.joint_pos + 0.1
     env = make_env(scene, distilled, num_envs=6)
     env.clip_id[:] = torch.tensor([0, 1, 0, 1, 1, 0])
-    view = ReferenceView(env, ReferenceTimeline(mocap, env.layout.link_names), env.cfg.keyframes,
+    view = ReferenceView(env, ReferenceTimeline(mocap, env), env.cfg.keyframes,
                          env.cfg.warmup_frames)
     members = [TeacherMember("t0", ConstantPolicy(0.5, env.num_actions), None, view=view, action_offset="reference"),
                TeacherMember("t1", ConstantPolicy(-0.5, env.num_actions, 0.1), None, view=view,
