@@ -1,8 +1,8 @@
 """Distillation with RL fine-tuning (InterMimic Alg. 1) on the PPO runner's hooks.
 
 Each iteration (t = iterations done): the student executes its own sampled action with probability
-min(t / beta, 1), the routed teacher's action otherwise (`_select_actions`, PPO.act with given actions); the
-teacher's mean and std are stored with every transition; the actor minimises w_PPO * L_PPO + w_D * L_distill
+min(t / beta, 1), the routed teacher's action otherwise (`_select_actions`); every transition stores the student's
+sample (PPO.act) and the teacher's mean and std; the actor minimises w_PPO * L_PPO + w_D * L_distill
 (PPO.surrogate_coef and PPO.extra_actor_loss) and the critic learns the env's (teacher) reward throughout.
 Checkpoints, resume, TensorBoard and progress come from OnPolicyRunner; a student checkpoint is a PPO checkpoint
 with policy_kind "student", the token layout and the task, plus the samplers' state for an exact resume.
@@ -87,20 +87,21 @@ class DistillationRunner(OnPolicyRunner):
             self._hook_scalars.update(hook(t) or {})
 
     def _select_actions(self, actor_obs: Tensor, critic_obs: Tensor, extra_obs: dict[str, Tensor]) -> Tensor:
+        """Alg. 1 lines 4-12: store the student's own sample a^(S) and the teacher's a^(T) with every transition;
+        execute a^(S) with probability min(t / beta, 1), a^(T) otherwise. PPO's ratio is thus always taken on the
+        student's own samples (on-policy): a teacher action can be very unlikely under the student, and its
+        ratio after an update unbounded."""
         teacher_mean, teacher_std, _ = self.teacher.act(self.env)
         stored = {"teacher_mean": teacher_mean.to(self.device), "teacher_std": teacher_std.to(self.device)}
+        student = self.alg.act(actor_obs, critic_obs, stored)
         n = actor_obs.shape[0]
+        self._executed_total += n
         if self._student_probability >= 1.0:
             self._executed_student += n
-            self._executed_total += n
-            return self.alg.act(actor_obs, critic_obs, stored)
-        with torch.no_grad():
-            student = self.model.act(actor_obs)
+            return student
         use_student = torch.rand(n, device=self.device) < self._student_probability
         self._executed_student += use_student.sum()
-        self._executed_total += n
-        return self.alg.act(actor_obs, critic_obs, stored,
-                            actions=mix_actions(student, stored["teacher_mean"], use_student))
+        return mix_actions(student, stored["teacher_mean"], use_student)
 
     def _distillation_loss(self, extra_obs: dict[str, Tensor], mean: Tensor) -> Tensor:
         teacher_mean = extra_obs["teacher_mean"]

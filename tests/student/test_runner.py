@@ -37,12 +37,28 @@ def build(scene, overrides=(), log_dir=None, num_envs=4):
     return runner, memory, composite
 
 
-def test_schedule_mixture_and_stored_teacher_actions(scene):
+def record_executed(runner):
+    executed, step = [], runner.env.step
+
+    def recording_step(actions):
+        executed.append(actions.clone())
+        return step(actions)
+
+    runner.env.step = recording_step
+    return executed
+
+
+def test_schedule_mixture_and_stored_actions(scene):
     runner, memory, composite = build(scene, ["distill.beta=4"])
+    executed = record_executed(runner)
     runner.learn(Budget(iterations=1))
-    # t = 0: every executed action is the teacher's (stored with each transition as the distillation target)
+    # t = 0: every executed action is the teacher's (Alg. 1 line 10) ...
     storage = runner.alg.storage
-    assert torch.equal(storage.actions, storage.extra_obs["teacher_mean"])
+    assert torch.equal(torch.stack(executed), storage.extra_obs["teacher_mean"])
+    # ... while PPO stores the student's own sample a^(S) (line 12), so its likelihood ratio stays on-policy
+    assert not torch.equal(storage.actions, storage.extra_obs["teacher_mean"])
+    expected = torch.distributions.Normal(storage.action_means, storage.action_stds).log_prob(storage.actions)
+    assert torch.allclose(storage.log_probs, expected.sum(-1), atol=1e-4)
     runner.learn(Budget(iterations=5))
     probability = [v for _, v in memory.scalars["Distill/student_probability"]]
     assert probability == [0.0, 0.25, 0.5, 0.75, 1.0, 1.0]
@@ -51,8 +67,8 @@ def test_schedule_mixture_and_stored_teacher_actions(scene):
     fraction = [v for _, v in memory.scalars["Distill/student_fraction"]]
     assert fraction[0] == 0.0 and fraction[-1] == 1.0 and 0.0 < fraction[2] < 1.0
     assert runner.alg.surrogate_coef == 1.0
-    # p = 1: the student's own samples are executed, the teacher's action is still stored as the target
-    assert not torch.equal(storage.actions, storage.extra_obs["teacher_mean"])
+    # p = 1: the student's samples are executed; the teacher's action is still stored as the target
+    assert torch.equal(torch.stack(executed[-4:]), storage.actions)
     assert "Loss/extra_actor" in memory.scalars and "Distill/action_error" in memory.scalars
 
 
