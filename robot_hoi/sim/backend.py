@@ -6,8 +6,9 @@ position actuators, so the PD runs inside the physics step at the physics rate. 
 last physics sub-step, i.e. they lag the returned qpos by one physics step (< 5 ms); `set_state` recomputes them
 exactly for the reset environments.
 
-Implementations: `MujocoCpuBackend` (mujoco.rollout with a persistent thread pool). A MuJoCo Warp backend plugs in
-behind the same interface (tensors stay on the GPU).
+Implementations: `MujocoCpuBackend` (mujoco.rollout with a persistent thread pool, float64) and `MujocoWarpBackend`
+(mujoco_warp worlds on a CUDA device or warp's CPU device, float32; tensors stay where the physics is).
+`auto` picks warp when warp sees a CUDA device, else cpu.
 """
 
 from __future__ import annotations
@@ -52,28 +53,33 @@ class PhysicsBackend(ABC):
     @property
     @abstractmethod
     def qpos(self) -> Tensor:
-        """(num_envs, nq) float64 view of the current positions."""
+        """(num_envs, nq) view of the current positions (the backend's dtype and device)."""
 
     @property
     @abstractmethod
     def qvel(self) -> Tensor:
-        """(num_envs, nv) float64 view of the current velocities."""
+        """(num_envs, nv) view of the current velocities."""
 
     @property
     @abstractmethod
     def sensordata(self) -> Tensor:
-        """(num_envs, nsensordata) float64 view of the latest sensor readings."""
+        """(num_envs, nsensordata) view of the latest sensor readings."""
 
 
 def make_backend(name: str, model: mujoco.MjModel, num_envs: int, decimation: int, **kwargs) -> PhysicsBackend:
+    from robot_hoi.errors import UserError
+
+    if name == "auto":
+        from robot_hoi.sim.warp_backend import cuda_available
+
+        name = "warp" if cuda_available() else "cpu"
     if name == "cpu":
         from robot_hoi.sim.mujoco_cpu import MujocoCpuBackend
 
+        kwargs.pop("device", None)
         return MujocoCpuBackend(model, num_envs, decimation, **kwargs)
     if name == "warp":
-        from robot_hoi.errors import UserError
+        from robot_hoi.sim.warp_backend import MujocoWarpBackend
 
-        raise UserError("the MuJoCo Warp backend is not built yet; use --backend cpu")
-    from robot_hoi.errors import UserError
-
-    raise UserError(f"unknown physics backend {name!r} (choose cpu or warp)")
+        return MujocoWarpBackend(model, num_envs, decimation, **kwargs)
+    raise UserError(f"unknown physics backend {name!r} (choose cpu, warp or auto)")
