@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import argparse
+import os
 from pathlib import Path
 
 from robot_hoi.paths import CONFIGS_DIR, REPO_ROOT
 
 TASK_CONFIG = CONFIGS_DIR / "tasks" / "interaction.yaml"
+SUMMARY_FILE = "teachers.json"  # per-teacher summaries of the last `robot-hoi train` into this run folder
 PRESETS = {"paper": CONFIGS_DIR / "train" / "ppo.yaml", "fast": CONFIGS_DIR / "train" / "ppo_fast.yaml"}
 
 
@@ -35,6 +37,21 @@ def register(subparsers) -> None:
     p.add_argument("--torch-threads", type=int, default=1,
                    help="torch CPU threads (default 1: the physics pool owns the cores; small-batch ops lose "
                         "more to thread hand-offs than they gain)")
+    p.add_argument("--eval-episodes", type=int, default=4,
+                   help="episodes per clip for each teacher's eval.json after training (default 4)")
+    c = p.add_argument_group("distributed teachers (robot_hoi/rl/cluster.py)")
+    c.add_argument("--cluster", default="none", choices=["none", "ray"],
+                   help="none: teachers one after another here; ray: one Ray task per teacher group")
+    c.add_argument("--address", default=None,
+                   help="Ray cluster address (e.g. auto, 10.0.0.5:6379, ray://head:10001); default: a local instance")
+    c.add_argument("--cpus-per-teacher", type=float, default=1.0, help="Ray CPUs per teacher task (default 1)")
+    c.add_argument("--gpus-per-teacher", type=float, default=None,
+                   help="Ray GPUs per teacher task (default: 1 if the cluster has GPUs, else 0)")
+    c.add_argument("--max-retries", type=int, default=3,
+                   help="re-runs of a failed or pre-empted teacher; each resumes from its last checkpoint")
+    c.add_argument("--storage", default="auto", choices=["auto", "shared", "local"],
+                   help="auto: detect whether workers see the run folder; shared: they must; local: workers "
+                        "train in their temp folder and send the results back")
     p.add_argument("--teachers", default=None, help="student: the teacher run folder (the --out of `robot-hoi train`)")
     p.add_argument("--option", dest="options", action="append", default=[],
                    help="student: a configs/train/student_options preset, e.g. complexmimic, skillmimic_v2 (repeatable)")
@@ -43,21 +60,31 @@ def register(subparsers) -> None:
 
 def run(args: argparse.Namespace) -> int:
     if args.stage == "student":
+        if args.cluster != "none":
+            from robot_hoi.errors import UserError
+
+            raise UserError("--cluster trains teachers; the student trains here (drop --cluster)")
         from robot_hoi.student.pipeline import run as train_student
 
         return train_student(args)
+    import json
     import time
+    import uuid
 
     import torch
 
     from robot_hoi.embodiment import load_embodiment
+    from robot_hoi.errors import UserError
     from robot_hoi.rl.budget import parse_budget
     from robot_hoi.rl.config import load_train_config
-    from robot_hoi.rl.runner import OnPolicyRunner
+    from robot_hoi.rl.teacher_job import PREEMPT_HOOK_ENV, TeacherJob, format_line, print_summary
     from robot_hoi.tasks.interaction import factory
     from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg
+    from robot_hoi.utils.atomic import atomic_write_text
     from robot_hoi.utils.config import load_yaml_dataclass
 
+    if args.eval_episodes < 1:
+        raise UserError(f"--eval-episodes must be at least 1, got {args.eval_episodes}")
     torch.set_num_threads(max(args.torch_threads, 1))
     env_overrides = [o[len("env."):] for o in args.overrides if o.startswith("env.")]
     train_overrides = [o for o in args.overrides if not o.startswith("env.")]
@@ -73,28 +100,35 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out) if args.out else REPO_ROOT / "runs" / f"{time.strftime('%Y%m%d-%H%M%S')}-{embodiment.name}"
     print(f"training {len(groups)} teacher(s) on {len(clips)} clip(s) -> {out}")
     per_group = _split_budget(budget, len(groups))
-    summary = {}
-    for name, members in groups.items():
-        run_dir = out / name
-        run_dir.mkdir(parents=True, exist_ok=True)
-        group_clips = [clips[i] for i in members]
-        group_sources = [sources[i] for i in members]
-        factory.write_task(run_dir, group_sources, env_cfg, embodiment.name, name)
-        torch.manual_seed(train_cfg.seed)
-        env = factory.make_env(group_clips, env_cfg, embodiment, cache=run_dir / "references")
-        runner = OnPolicyRunner(env, train_cfg, run_dir, device=args.device)
-        if args.resume:
-            latest = _latest_checkpoint(run_dir)
-            if latest is not None:
-                runner.resume(latest)
-                print(f"[{name}] resumed from {latest}")
-        print(f"[{name}] {len(group_clips)} clip(s): {', '.join(c.name for c in group_clips)}; "
-              f"obs {env.obs_dims}, {env.num_envs} envs")
-        summary[name] = runner.learn(per_group)
-        runner.close()
-    for name, stats in summary.items():
-        shown = {k: round(v, 3) for k, v in stats.items() if isinstance(v, float)}
-        print(f"[{name}] {shown}")
+    token = uuid.uuid4().hex
+    jobs = [TeacherJob(group=name, sources=[sources[i] for i in members], run_dir=str(out / name),
+                       embodiment=embodiment.name, env_cfg=env_cfg, train_cfg=train_cfg, budget=per_group,
+                       run_token=token, device=args.device, torch_threads=max(args.torch_threads, 1),
+                       resume=args.resume, eval_episodes=args.eval_episodes,
+                       preempt_marker_dir=os.environ.get(PREEMPT_HOOK_ENV) or None)
+            for name, members in groups.items()]
+    group_clips = [[clips[i] for i in members] for members in groups.values()]
+    if args.cluster == "ray":
+        from robot_hoi.rl.cluster import RayOptions, run_teachers
+
+        options = RayOptions(address=args.address, cpus_per_teacher=args.cpus_per_teacher,
+                             gpus_per_teacher=args.gpus_per_teacher, max_retries=args.max_retries,
+                             storage=args.storage)
+        summaries, failures = run_teachers(jobs, group_clips, options, resume=args.resume)
+    else:
+        from robot_hoi.rl.teacher_job import train_teacher_group
+
+        summaries, failures = {}, {}
+        for k, (job, job_clips) in enumerate(zip(jobs, group_clips, strict=True), start=1):
+            summaries[job.group] = train_teacher_group(job, job_clips)
+            print(f"[{k}/{len(jobs)}] {format_line(summaries[job.group])}")
+    report = {"cluster": args.cluster, "budget_per_teacher": per_group.describe(), "teachers": summaries,
+              "failures": failures}
+    atomic_write_text(out / SUMMARY_FILE, json.dumps(report, indent=2) + "\n")
+    print_summary(summaries, failures, title=f"robot-hoi train: {out}")
+    if failures:
+        print(f"{len(failures)} of {len(jobs)} teacher(s) failed: {', '.join(failures)}")
+        return 1
     print(f"done: {out}")
     return 0
 
@@ -106,12 +140,3 @@ def _split_budget(budget, parts: int):
     share = {k: (None if v is None else type(v)(max(v / parts, 1))) for k, v in
              (("wall_seconds", budget.wall_seconds), ("samples", budget.samples), ("iterations", budget.iterations))}
     return replace(budget, **share)
-
-
-def _latest_checkpoint(run_dir: Path) -> Path | None:
-    final = run_dir / "model_final.pt"
-    if final.exists():
-        return final
-    found = sorted(run_dir.glob("model_*.pt"), key=lambda p: int(p.stem.split("_")[-1]) if
-                   p.stem.split("_")[-1].isdigit() else -1)
-    return found[-1] if found else None

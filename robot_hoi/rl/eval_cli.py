@@ -58,7 +58,7 @@ def run(args: argparse.Namespace) -> int:
             load_yaml_dataclass(InteractionEnvCfg, TASK_CONFIG)
         sources = task["sources"] if task else factory.expand_sources(args.data)
     embodiment = load_embodiment(args.embodiment)
-    _evaluation_settings(env_cfg, args)
+    evaluation_settings(env_cfg, args.episodes, args.seed)
 
     results = {}
     for source in sources:
@@ -70,7 +70,7 @@ def run(args: argparse.Namespace) -> int:
             model = ActorCritic(env.obs_dims["policy"], env.obs_dims["critic"], env.num_actions, train_cfg.model)
             model.eval()
         results[clip.name] = evaluate(env, model)
-    summary = _summarise(results)
+    summary = summarise(results)
     if args.json:
         print(json.dumps({"checkpoint": args.checkpoint, "clips": results, "mean": summary}, indent=2))
     else:
@@ -78,9 +78,10 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _evaluation_settings(env_cfg, args) -> None:
-    env_cfg.num_envs = args.episodes
-    env_cfg.seed = args.seed
+def evaluation_settings(env_cfg, episodes: int, seed: int) -> None:
+    """Turn a training env config into the evaluation one (in place): `episodes` stand starts, no noise, no PSI."""
+    env_cfg.num_envs = episodes
+    env_cfg.seed = seed
     env_cfg.init.stand_start_probability = 1.0
     env_cfg.init.spawn_noise_xy = 0.0
     env_cfg.psi.enabled = False
@@ -122,7 +123,7 @@ def evaluate(env, model, stochastic: bool = False) -> dict[str, float]:
     }
 
 
-def _summarise(results: dict[str, dict[str, float]]) -> dict[str, float]:
+def summarise(results: dict[str, dict[str, float]]) -> dict[str, float]:
     keys = ("success_rate", "duration_s", "E_h_cm", "E_o_cm")
     return {k: sum(r[k] for r in results.values()) / max(len(results), 1) for k in keys}
 

@@ -1,0 +1,257 @@
+"""Teachers as Ray tasks: `robot-hoi train --cluster ray [--address ADDR]`.
+
+One Ray task per teacher group runs robot_hoi.rl.teacher_job.train_teacher_group (the code path of the
+sequential loop) with its own CPUs and GPU (--cpus-per-teacher, --gpus-per-teacher; by default one GPU per
+teacher when the cluster has GPUs, and a teacher holding a GPU trains on it). Ray re-runs a task whose worker
+died (pre-emption, a lost node) or raised, up to --max-retries times; the re-run resumes from the group's latest
+checkpoint with the budget that is left (teacher_job's job_state.json). Bad input (a UserError) is reported once,
+not retried. The driver prints a line per teacher as it finishes and a table at the end.
+
+Where results land. Before submitting, the driver writes a fresh random token (one per invocation) into
+RUN/.ray_run_token. A worker that reads the same token there sees the driver's filesystem (the local Ray instance,
+or cluster nodes that mount the run folder, e.g. NFS, as Ray Train's storage_path expects): it trains straight
+into RUN/<group>/. A worker that does not (another machine with its own disks) trains in a staging folder
+<worker tmp>/robot_hoi_ray/<token>/<group>, returns that folder as a tar archive (without references/, the
+retarget cache any node rebuilds in seconds) and deletes it; the driver unpacks the archive into RUN/<group>/ file
+by file with atomic renames, so the group folder then mirrors the worker's (its references/ kept). --storage
+shared|local skips the detection: shared fails loudly on a worker that cannot see the run folder, local always
+ships archives. Without shared storage a retry resumes only if Ray re-runs it on the same node (the staging folder
+survives there); with --resume the driver first sends its copy of the group folder to the worker.
+
+Cluster nodes need robot-hoi installed at the same commit (`pip install -e .[cluster]`); clips travel with the
+task, so clip files need to exist only on the driver.
+"""
+
+from __future__ import annotations
+
+import copy
+import io
+import logging
+import os
+import shutil
+import socket
+import tarfile
+import tempfile
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+from robot_hoi.errors import UserError
+from robot_hoi.rl.teacher_job import (
+    TeacherJob,
+    format_line,
+    latest_checkpoint,
+    read_job_state,
+    train_teacher_group,
+)
+from robot_hoi.utils.atomic import atomic_write_text
+
+TOKEN_FILE = ".ray_run_token"
+STORAGE_MODES = ("auto", "shared", "local")
+NOT_SHIPPED = ("references",)  # top-level entries of a group folder left out of archives (rebuilt on demand)
+STAGING_DIRNAME = "robot_hoi_ray"
+INCOMING_DIRNAME = ".ray_incoming"  # under RUN/: one level down, so readers of RUN/<group>/ never see it
+
+
+@dataclass
+class RayOptions:
+    address: str | None = None  # None: start a local Ray instance (unless this process already runs one)
+    cpus_per_teacher: float = 1.0
+    gpus_per_teacher: float | None = None  # None: 1 when the cluster has GPUs, else 0
+    max_retries: int = 3
+    storage: str = "auto"  # one of STORAGE_MODES
+
+
+# --- worker side ------------------------------------------------------------------------------------------------
+def teacher_task(job: TeacherJob, clips: list, storage: str, seed_archive: bytes | None = None) -> dict[str, Any]:
+    """Body of one Ray task: train the group where the driver can get at it (see the module docstring)."""
+    import ray
+
+    clips = copy.deepcopy(clips)  # arguments arrive as read-only zero-copy arrays from the object store
+    try:
+        if job.device == "cpu" and ray.get_gpu_ids():
+            job = replace(job, device="cuda")  # Ray sets CUDA_VISIBLE_DEVICES to this task's GPU(s)
+        shared = sees_driver_folder(Path(job.run_dir).parent, job.run_token)
+        if storage == "shared" and not shared:
+            raise UserError(f"{Path(job.run_dir).parent}: run folder not visible on worker {socket.gethostname()} "
+                            f"(no matching {TOKEN_FILE}); mount it on every node or use --storage auto/local")
+        if shared and storage != "local":
+            return {**train_teacher_group(job, clips), "storage": "shared"}
+        staging = staging_dir(job)
+        _prepare_staging(staging, job.run_token, seed_archive)
+        summary = train_teacher_group(job.at(staging), clips)
+        summary.update(storage="local", archive=pack_folder(staging))
+        shutil.rmtree(staging, ignore_errors=True)
+        return summary
+    except Exception as exc:
+        if getattr(exc, "user_error", False):
+            return {"group": job.group, "user_error": str(exc)}  # returned, so Ray does not retry it
+        raise
+
+
+def sees_driver_folder(out_dir: Path, token: str) -> bool:
+    try:
+        return (out_dir / TOKEN_FILE).read_text().strip() == token
+    except OSError:
+        return False
+
+
+def staging_dir(job: TeacherJob) -> Path:
+    return Path(tempfile.gettempdir()) / STAGING_DIRNAME / job.run_token / job.group
+
+
+def _prepare_staging(staging: Path, token: str, seed_archive: bytes | None) -> None:
+    """Keep a staging folder this invocation already trained in (a retry on the same node); else start it from
+    the driver's copy (--resume) or empty."""
+    state = read_job_state(staging)
+    if state is not None and state["run_token"] == token:
+        return
+    shutil.rmtree(staging, ignore_errors=True)
+    staging.mkdir(parents=True)
+    if seed_archive is not None:
+        unpack_into(seed_archive, staging)
+
+
+# --- moving group folders ---------------------------------------------------------------------------------------
+def pack_folder(folder: Path, skip: tuple[str, ...] = NOT_SHIPPED) -> bytes:
+    """The folder's files as an uncompressed tar (checkpoints are float tensors: gzip buys little), leaving out
+    the top-level entries in `skip` and hidden files (atomic writes' temporaries)."""
+    buffer = io.BytesIO()
+    with tarfile.open(fileobj=buffer, mode="w") as tar:
+        for path in sorted(Path(folder).rglob("*")):
+            rel = path.relative_to(folder)
+            if rel.parts[0] in skip or any(part.startswith(".") for part in rel.parts) or not path.is_file():
+                continue
+            tar.add(path, arcname=rel.as_posix(), recursive=False)
+    return buffer.getvalue()
+
+
+def unpack_into(archive: bytes, target: Path, keep: tuple[str, ...] = NOT_SHIPPED) -> None:
+    """Make `target` mirror the archive: every file lands by an atomic rename, then files the archive lacks go
+    (except the top-level entries in `keep`). A crash part-way leaves whole files only."""
+    target = Path(target)
+    incoming_root = target.parent / INCOMING_DIRNAME
+    incoming_root.mkdir(parents=True, exist_ok=True)
+    incoming = Path(tempfile.mkdtemp(dir=incoming_root, prefix=f"{target.name}-"))
+    try:
+        with tarfile.open(fileobj=io.BytesIO(archive), mode="r:") as tar:
+            tar.extractall(incoming, filter="data")  # "data": no absolute paths, no escaping links
+        arrived = {p.relative_to(incoming) for p in incoming.rglob("*") if p.is_file()}
+        for rel in sorted(arrived):
+            (target / rel).parent.mkdir(parents=True, exist_ok=True)
+            os.replace(incoming / rel, target / rel)
+        for path in sorted(target.rglob("*"), reverse=True):
+            rel = path.relative_to(target)
+            if rel.parts[0] in keep or rel in arrived:
+                continue
+            if path.is_file() or path.is_symlink():
+                path.unlink()
+            elif path.is_dir() and not any(path.iterdir()):
+                path.rmdir()
+    finally:
+        shutil.rmtree(incoming, ignore_errors=True)
+        try:
+            incoming_root.rmdir()
+        except OSError:
+            pass  # another group is unpacking
+
+
+# --- driver side ------------------------------------------------------------------------------------------------
+def run_teachers(jobs: list[TeacherJob], clips: list[list], options: RayOptions, resume: bool = False,
+                 log=print) -> tuple[dict[str, dict], dict[str, str]]:
+    """Train every job as a Ray task; gather results into each job's run_dir.
+
+    Returns (summaries of the teachers that finished, {group: error} of those that failed after all retries).
+    Uses the Ray instance this process is connected to, else connects to options.address or starts a local one
+    (and shuts it down at the end)."""
+    import ray
+
+    if options.storage not in STORAGE_MODES:
+        raise UserError(f"--storage must be one of {', '.join(STORAGE_MODES)}, not {options.storage!r}")
+    if options.max_retries < 0 or options.cpus_per_teacher <= 0:
+        raise UserError("--max-retries must be >= 0 and --cpus-per-teacher positive")
+    out_dirs = {Path(job.run_dir).parent for job in jobs}
+    if len(out_dirs) != 1 or len({job.run_token for job in jobs}) != 1:
+        raise ValueError("jobs of one call share the run folder and the run token")
+    out_dir = out_dirs.pop()
+    started_here = not ray.is_initialized()
+    if started_here:
+        try:
+            ray.init(address=options.address, include_dashboard=False, logging_level=logging.WARNING)
+        except (ConnectionError, ValueError, RuntimeError) as exc:
+            raise UserError(f"Ray at {options.address or 'a new local instance'}: {exc}") from None
+    pending: dict = {}
+    try:
+        resources = ray.cluster_resources()
+        gpus = options.gpus_per_teacher
+        if gpus is None:
+            gpus = 1.0 if resources.get("GPU", 0.0) >= 1.0 else 0.0
+        for kind, need in (("CPU", options.cpus_per_teacher), ("GPU", gpus)):
+            if need > resources.get(kind, 0.0):
+                raise UserError(f"each teacher asks for {need:g} {kind} but the Ray cluster has "
+                                f"{resources.get(kind, 0.0):g}; lower --{kind.lower()}s-per-teacher")
+        out_dir.mkdir(parents=True, exist_ok=True)
+        atomic_write_text(out_dir / TOKEN_FILE, jobs[0].run_token + "\n")
+        task = ray.remote(teacher_task)
+        for job, group_clips in zip(jobs, clips, strict=True):
+            job = _for_worker(job, options)
+            seed = None
+            if resume and options.storage != "shared" and latest_checkpoint(Path(job.run_dir)) is not None:
+                seed = pack_folder(Path(job.run_dir))
+            ref = task.options(num_cpus=options.cpus_per_teacher, num_gpus=gpus, max_retries=options.max_retries,
+                               retry_exceptions=True, name=f"teacher:{job.group}").remote(
+                job, group_clips, options.storage, seed)
+            pending[ref] = job
+        log(f"ray: {len(jobs)} teacher task(s), {options.cpus_per_teacher:g} CPU + {gpus:g} GPU each, on a "
+            f"cluster of {resources.get('CPU', 0):g} CPUs / {resources.get('GPU', 0):g} GPUs")
+        return _gather(pending, len(jobs), log)
+    finally:
+        for ref in pending:  # interrupted: do not leave teachers running on a shared cluster
+            ray.cancel(ref, force=True)
+        (out_dir / TOKEN_FILE).unlink(missing_ok=True)
+        if started_here:
+            ray.shutdown()
+
+
+def _for_worker(job: TeacherJob, options: RayOptions) -> TeacherJob:
+    """No progress bars in workers (the driver prints lines); the physics pool sized to the task's CPUs."""
+    train_cfg = copy.deepcopy(job.train_cfg)
+    train_cfg.runner.progress = False
+    env_cfg = job.env_cfg
+    if env_cfg.nthread is None:
+        env_cfg = copy.deepcopy(env_cfg)
+        env_cfg.nthread = max(int(options.cpus_per_teacher), 1)
+    return replace(job, train_cfg=train_cfg, env_cfg=env_cfg)
+
+
+def _gather(pending: dict, total: int, log) -> tuple[dict[str, dict], dict[str, str]]:
+    import ray
+
+    summaries: dict[str, dict] = {}
+    failures: dict[str, str] = {}
+    while pending:
+        ready, _ = ray.wait(list(pending), num_returns=1)
+        for ref in ready:
+            job = pending.pop(ref)
+            count = f"[{len(summaries) + len(failures) + 1}/{total}]"
+            try:
+                result = ray.get(ref)
+            except ray.exceptions.RayError as exc:
+                failures[job.group] = _last_line(exc)
+                log(f"{count} {job.group}: FAILED after retries: {failures[job.group]}")
+                continue
+            if "user_error" in result:
+                failures[job.group] = result["user_error"]
+                log(f"{count} {job.group}: error: {result['user_error']}")
+                continue
+            archive = result.pop("archive", None)
+            if archive is not None:
+                unpack_into(archive, Path(job.run_dir))
+            summaries[job.group] = result
+            log(f"{count} {format_line(result)}")
+    return summaries, failures
+
+
+def _last_line(exc: BaseException) -> str:
+    lines = [line for line in str(exc).strip().splitlines() if line.strip()]
+    return lines[-1].strip() if lines else type(exc).__name__

@@ -1,0 +1,247 @@
+"""One teacher group from start to finish: train into its folder, resume after a pre-emption, evaluate.
+
+`train_teacher_group(job)` is the single code path of `robot-hoi train`: the sequential loop calls it in-process
+and `--cluster ray` calls it inside one Ray task per group (robot_hoi/rl/cluster.py).
+
+Group folder (beside the runner's checkpoints and logs):
+  task.json        clips and environment config (robot_hoi.tasks.interaction.factory.write_task)
+  job_state.json   the run token of the `robot-hoi train` invocation that owns the folder and the counters it
+                   started from. A retry of the same invocation (same token: a Ray task re-run after a crash or
+                   pre-emption) resumes from the latest checkpoint and trains only the budget left; a new
+                   invocation starts afresh, or with `--resume` continues with a fresh budget.
+  eval.json        InterMimic's metrics of the final policy (robot_hoi.rl.eval_cli.evaluate), per clip and mean.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import os
+import socket
+import time
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+from robot_hoi.rl.budget import Budget
+from robot_hoi.utils.atomic import atomic_write_text
+
+JOB_STATE_FILE = "job_state.json"
+EVAL_FILE = "eval.json"
+SCALARS_FILE = "scalars.jsonl"
+# Test-only hook: a folder; the first periodic checkpoint of each group then kills the process once (as a
+# pre-empted node would), leaving <folder>/<group>.preempted so that the retry trains on.
+PREEMPT_HOOK_ENV = "ROBOT_HOI_TEST_PREEMPT_AFTER_CHECKPOINT"
+PREEMPT_EXIT_CODE = 75
+
+
+@dataclass
+class TeacherJob:
+    """Everything a worker needs to train one group (picklable; paths are strings as seen by the worker)."""
+
+    group: str
+    sources: list[str]  # clip sources recorded in task.json (factory.expand_sources)
+    run_dir: str  # the group folder
+    embodiment: str
+    env_cfg: Any  # InteractionEnvCfg
+    train_cfg: Any  # TrainConfig
+    budget: Budget
+    run_token: str  # one per `robot-hoi train` invocation
+    device: str = "cpu"
+    torch_threads: int = 1
+    resume: bool = False  # --resume: continue from the latest checkpoint even if another invocation wrote it
+    eval_episodes: int = 4  # episodes per clip for eval.json
+    eval_seed: int = 0
+    preempt_marker_dir: str | None = None  # PREEMPT_HOOK_ENV, read by the driver
+
+    def at(self, run_dir: str | Path) -> TeacherJob:
+        """The same job writing into another folder (a worker's local staging folder)."""
+        return replace(self, run_dir=str(run_dir))
+
+
+def latest_checkpoint(run_dir: Path) -> Path | None:
+    """model_final.pt, else the model_<it>.pt with the highest iteration."""
+    final = run_dir / "model_final.pt"
+    if final.exists():
+        return final
+    numbered = [(int(p.stem.split("_")[-1]), p) for p in run_dir.glob("model_*.pt")
+                if p.stem.split("_")[-1].isdigit()]
+    return max(numbered)[1] if numbered else None
+
+
+def read_job_state(run_dir: Path) -> dict | None:
+    path = Path(run_dir) / JOB_STATE_FILE
+    try:
+        state = json.loads(path.read_text())
+    except (OSError, json.JSONDecodeError):
+        return None  # absent, or written by something else: treated as a new invocation
+    return state if isinstance(state, dict) and "run_token" in state else None
+
+
+def remaining_budget(budget: Budget, state: dict, iteration: int, samples: int, time_s: float) -> Budget | None:
+    """What is left of this invocation's budget after the counters moved from `state`'s start; None: spent."""
+    left = {
+        "wall_seconds": None if budget.wall_seconds is None else
+        budget.wall_seconds - (time_s - state["start_time_s"]),
+        "samples": None if budget.samples is None else budget.samples - (samples - state["start_samples"]),
+        "iterations": None if budget.iterations is None else
+        budget.iterations - (iteration - state["start_iteration"]),
+    }
+    if any(v is not None and v <= 0 for v in left.values()):
+        return None
+    return Budget(**left)
+
+
+def train_teacher_group(job: TeacherJob, clips: list | None = None, log=print) -> dict[str, Any]:
+    """Train (or finish training) one group in job.run_dir, evaluate it, write eval.json; return a summary.
+
+    `clips` are the loaded clips of job.sources (loaded here when None; a Ray task receives them from the
+    driver, so clip files need not exist on the worker)."""
+    import torch
+
+    from robot_hoi.embodiment import load_embodiment
+    from robot_hoi.rl.checkpoint import read_checkpoint
+    from robot_hoi.rl.runner import OnPolicyRunner
+    from robot_hoi.tasks.interaction import factory
+
+    started = time.monotonic()
+    torch.set_num_threads(max(job.torch_threads, 1))
+    run_dir = Path(job.run_dir)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    if clips is None:
+        clips = [factory.load_source(s) for s in job.sources]
+    embodiment = load_embodiment(job.embodiment)
+    factory.write_task(run_dir, job.sources, job.env_cfg, embodiment.name, job.group)
+
+    state = read_job_state(run_dir)
+    same_invocation = state is not None and state["run_token"] == job.run_token
+    latest = latest_checkpoint(run_dir)
+    resume_from = latest if latest is not None and (job.resume or same_invocation) else None
+    if latest is not None and resume_from is None:
+        log(f"[{job.group}] starting afresh in a folder with checkpoints of an earlier run (--resume continues "
+            f"from {latest.name})")
+    if resume_from is not None:
+        # Rows logged after that checkpoint are re-trained now; drop them so the log has each iteration once.
+        _trim_scalars(run_dir / SCALARS_FILE, int(read_checkpoint(resume_from)["iteration"]))
+
+    torch.manual_seed(job.train_cfg.seed)
+    env = factory.make_env(clips, job.env_cfg, embodiment, cache=run_dir / "references")
+    runner = OnPolicyRunner(env, job.train_cfg, run_dir, device=job.device)
+    resumed_from = None
+    if resume_from is not None:
+        runner.resume(resume_from)
+        resumed_from = runner.iteration
+        log(f"[{job.group}] resumed from {resume_from.name} (iteration {runner.iteration})")
+    if not same_invocation:
+        state = {"run_token": job.run_token, "start_iteration": runner.iteration,
+                 "start_samples": runner.total_samples, "start_time_s": runner.total_time_s}
+        atomic_write_text(run_dir / JOB_STATE_FILE, json.dumps(state, indent=2) + "\n")
+    if job.preempt_marker_dir:
+        _arm_preemption(runner, Path(job.preempt_marker_dir) / f"{job.group}.preempted")
+
+    budget = remaining_budget(job.budget, state, runner.iteration, runner.total_samples, runner.total_time_s)
+    log(f"[{job.group}] {len(clips)} clip(s): {', '.join(c.name for c in clips)}; obs {env.obs_dims}, "
+        f"{env.num_envs} envs; budget {'spent' if budget is None else budget.describe()}")
+    if budget is not None:
+        stats = runner.learn(budget)
+    else:
+        stats = {"iterations": 0.0, "samples": 0.0, "wall_s": 0.0, "mean_return": float("nan")}
+    runner.close()
+    checkpoint = run_dir / f"model_{runner.iteration}.pt"  # learn() always ends with this one
+    checkpoint = checkpoint if checkpoint.exists() else latest_checkpoint(run_dir)
+
+    model = runner.model.to("cpu").eval()  # evaluation envs hand over CPU tensors
+    evaluation = evaluate_group(model, clips, job, embodiment, run_dir / "references")
+    evaluation.update(group=job.group, checkpoint=checkpoint.name if checkpoint else None,
+                      iteration=runner.iteration)
+    atomic_write_text(run_dir / EVAL_FILE, json.dumps(evaluation, indent=2) + "\n")
+    return {
+        "group": job.group,
+        "iteration": runner.iteration,
+        "iterations": int(stats["iterations"]),
+        "samples": int(stats["samples"]),
+        "train_s": float(stats["wall_s"]),
+        "wall_s": time.monotonic() - started,
+        "mean_return": float(stats["mean_return"]),
+        "resumed_from": resumed_from,
+        "checkpoint": evaluation["checkpoint"],
+        "eval": evaluation["mean"],
+        "host": socket.gethostname(),
+        "run_dir": str(run_dir),
+    }
+
+
+def evaluate_group(model, clips: list, job: TeacherJob, embodiment, cache: Path) -> dict[str, Any]:
+    """eval_cli's evaluation (stand starts, policy mean, no noise) on each clip of the group."""
+    from robot_hoi.rl.eval_cli import evaluate, evaluation_settings, summarise
+    from robot_hoi.tasks.interaction import factory
+
+    results = {}
+    for clip in clips:
+        cfg = copy.deepcopy(job.env_cfg)
+        evaluation_settings(cfg, job.eval_episodes, job.eval_seed)
+        results[clip.name] = evaluate(factory.make_env([clip], cfg, embodiment, cache=cache), model)
+    return {"episodes_per_clip": job.eval_episodes, "seed": job.eval_seed, "clips": results,
+            "mean": summarise(results)}
+
+
+def _trim_scalars(path: Path, last_step: int) -> None:
+    if not path.exists():
+        return
+    lines = path.read_text().splitlines(keepends=True)
+    kept = [line for line in lines if _step(line) <= last_step]
+    if len(kept) != len(lines):
+        atomic_write_text(path, "".join(kept))
+
+
+def _step(line: str) -> float:
+    try:
+        return float(json.loads(line)["step"])
+    except (ValueError, KeyError, TypeError):
+        return float("inf")  # a torn last line from a killed process goes too
+
+
+def _arm_preemption(runner, marker: Path) -> None:
+    """Test hook: after the first periodic checkpoint, die once like a pre-empted node (no clean-up)."""
+    if marker.exists():
+        return
+    save = runner._save_periodic
+
+    def save_then_die() -> None:
+        save()
+        marker.parent.mkdir(parents=True, exist_ok=True)
+        marker.write_text(f"pre-empted after iteration {runner.iteration}\n")
+        os._exit(PREEMPT_EXIT_CODE)
+
+    runner._save_periodic = save_then_die
+
+
+def format_line(summary: dict[str, Any]) -> str:
+    """One progress line per finished teacher."""
+    ev = summary["eval"]
+    resumed = "" if summary["resumed_from"] is None else f" (resumed at {summary['resumed_from']})"
+    return (f"{summary['group']}: it {summary['iteration']}{resumed}, return {summary['mean_return']:.3g}, "
+            f"success {ev['success_rate']:.2f}, E_h {ev['E_h_cm']:.1f} cm, E_o {ev['E_o_cm']:.1f} cm, "
+            f"{summary['wall_s']:.0f} s on {summary['host']}")
+
+
+def print_summary(summaries: dict[str, dict], failures: dict[str, str], title: str) -> None:
+    """The final table: one row per teacher (failed ones with their error)."""
+    from rich import box
+    from rich.console import Console
+    from rich.table import Table
+
+    table = Table(title=title, box=box.SIMPLE_HEAD, pad_edge=False, show_edge=False, collapse_padding=True)
+    for col in ("teacher", "it", "return", "success", "dur s", "E_h cm", "E_o cm", "wall s"):  # host: in the lines
+        table.add_column(col, justify="left" if col == "teacher" else "right",
+                         no_wrap=col == "teacher", min_width=len(col))
+    for name, s in summaries.items():
+        ev = s["eval"]
+        table.add_row(name, str(s["iteration"]), f"{s['mean_return']:.3g}", f"{ev['success_rate']:.2f}",
+                      f"{ev['duration_s']:.2f}", f"{ev['E_h_cm']:.1f}", f"{ev['E_o_cm']:.1f}", f"{s['wall_s']:.0f}")
+    for name in failures:
+        table.add_row(name, "-", "failed", *[""] * 5)
+    console = Console()
+    console.print(table)
+    for name, error in failures.items():
+        console.print(f"{name}: {error}", markup=False, highlight=False)

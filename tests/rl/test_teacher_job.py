@@ -1,0 +1,67 @@
+"""teacher_job: one group trained in-process (the sequential path), retried with the same run token (what a Ray
+re-run does) and continued by a new invocation with --resume; budgets left after a partial run."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+
+import pytest
+import torch
+
+from robot_hoi.rl.budget import Budget
+from robot_hoi.rl.config import FAST_PPO_CONFIG, load_train_config
+from robot_hoi.rl.teacher_job import (
+    EVAL_FILE,
+    JOB_STATE_FILE,
+    SCALARS_FILE,
+    TeacherJob,
+    remaining_budget,
+    train_teacher_group,
+)
+from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg
+
+
+def test_remaining_budget_subtracts_what_this_invocation_already_did():
+    state = {"start_iteration": 10, "start_samples": 1000, "start_time_s": 5.0}
+    left = remaining_budget(Budget(wall_seconds=60, samples=5000, iterations=8), state, 13, 1600, 25.0)
+    assert left == Budget(wall_seconds=40.0, samples=4400, iterations=5)
+    assert remaining_budget(Budget(iterations=3), state, 13, 1600, 25.0) is None
+    assert remaining_budget(Budget(samples=600, iterations=100), state, 11, 1600, 25.0) is None
+
+
+@pytest.fixture
+def job(tmp_path):
+    torch.set_num_threads(1)
+    env_cfg = InteractionEnvCfg(num_envs=4, nthread=1)
+    train_cfg = load_train_config(FAST_PPO_CONFIG, ["runner.progress=false", "runner.tensorboard=false",
+                                                    "runner.save_interval=1"])
+    return TeacherJob(group="push", sources=["embedded:push"], run_dir=str(tmp_path / "push"),
+                      embodiment="g1_inspire", env_cfg=env_cfg, train_cfg=train_cfg, budget=Budget(iterations=2),
+                      run_token="first", eval_episodes=2)
+
+
+def _steps(folder) -> list[int]:
+    return [json.loads(line)["step"] for line in (folder / SCALARS_FILE).read_text().splitlines()]
+
+
+def test_retry_resumes_with_what_is_left_and_resume_continues(job, tmp_path):
+    folder = tmp_path / "push"
+    first = train_teacher_group(job, log=lambda _: None)
+    assert first["iteration"] == 2 and first["resumed_from"] is None and first["checkpoint"] == "model_2.pt"
+    assert json.loads((folder / JOB_STATE_FILE).read_text())["run_token"] == "first"
+    evaluation = json.loads((folder / EVAL_FILE).read_text())
+    assert evaluation["iteration"] == 2 and evaluation["clips"]["synth_push_seed0"]["episodes"] == 2
+
+    # the same invocation again (a Ray re-run after the task already finished its budget): no new iterations,
+    # and a log row written after the checkpoint by the killed attempt is dropped
+    with (folder / SCALARS_FILE).open("a") as f:
+        f.write(json.dumps({"step": 3, "Loss/value": 1.0}) + "\n" + '{"step": 4, "Loss/va')
+    retry = train_teacher_group(job, log=lambda _: None)
+    assert retry["resumed_from"] == 2 and retry["iterations"] == 0 and retry["iteration"] == 2
+    assert _steps(folder) == [1, 2]
+
+    # a new invocation with --resume continues with a fresh budget
+    again = train_teacher_group(replace(job, run_token="second", resume=True), log=lambda _: None)
+    assert again["resumed_from"] == 2 and again["iteration"] == 4 and _steps(folder) == [1, 2, 3, 4]
+    assert json.loads((folder / EVAL_FILE).read_text())["checkpoint"] == "model_4.pt"
