@@ -2,7 +2,8 @@
 
 The student reads only the deployable observation, so its file is what the robot runs. The sidecar is the
 reference the student tracked in training for the chosen clip (the teacher's rollout with reference
-distillation), verified like every export: onnx.checker, ORT vs torch on random and recorded observations.
+distillation), verified like every export: onnx.checker, ORT vs torch on random and recorded observations. Its
+joint angles, the PD targets of a zero action (action_offset "reference"), must lie inside the joint limits.
 """
 
 from __future__ import annotations
@@ -15,13 +16,18 @@ from robot_hoi.paths import POLICIES_DIR
 
 
 def run_student_export(args: argparse.Namespace, ckpt: Path) -> int:
+    import dataclasses
+
+    import numpy as np
+
     from deploy.motion import file_sha256
     from robot_hoi.embodiment import build_model, load_embodiment
     from robot_hoi.export.cli import offset_mode, record_observations
-    from robot_hoi.export.metadata import clip_identity, policy_metadata
+    from robot_hoi.export.metadata import actuator_limits, clip_identity, policy_metadata
     from robot_hoi.export.motion_sidecar import deploy_motion
     from robot_hoi.export.onnx_export import export_policy
     from robot_hoi.student.checkpoint import load_student
+    from robot_hoi.student.reference_distill import LIMIT_MARGIN
     from robot_hoi.student.task import read_student_task, task_folder
     from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg
     from robot_hoi.tasks.interaction.mdp.observations import student_observation_spec
@@ -54,10 +60,19 @@ def run_student_export(args: argparse.Namespace, ckpt: Path) -> int:
 
     out = Path(args.output) if args.output else POLICIES_DIR / f"{folder.parent.name}-student.onnx"
     motion_file = out.with_name(out.stem + ".motion.npz")
-    deploy_motion(env.references[index], source=str(motion_file)).save(motion_file)
     embodiment = load_embodiment(task["embodiment"])
+    mj_model = build_model(embodiment)
+    motion = deploy_motion(env.references[index], source=str(motion_file))
+    lower, upper, _ = actuator_limits(mj_model, embodiment.actuator_names)
+    outside = reference_outside_limits(motion.joint_pos, lower, upper)
+    if outside:
+        # references distilled before they were clipped at the source (reference_distill.FORMAT 1)
+        motion = dataclasses.replace(motion, joint_pos=np.clip(motion.joint_pos, lower + LIMIT_MARGIN,
+                                                               upper - LIMIT_MARGIN))
+        print(f"note: reference joints clipped into the joint limits ({outside})")
+    motion.save(motion_file)
     metadata = policy_metadata(
-        embodiment, build_model(embodiment), policy_kind="student", obs_spec=spec,
+        embodiment, mj_model, policy_kind="student", obs_spec=spec,
         keyframes=env_cfg.student_keyframes, action_clip=env_cfg.action_clip,
         clips=[clip_identity(clips[index], sources[index])],
         reference={"file": motion_file.name, "sha256": file_sha256(motion_file)},
@@ -68,3 +83,15 @@ def run_student_export(args: argparse.Namespace, ckpt: Path) -> int:
         print(line)
     print(f"wrote {motion_file} (reference of {names[index]}, {env.references[index].num_frames} frames)")
     return 0
+
+
+def reference_outside_limits(joint_pos, lower, upper) -> str:
+    """'' when every reference joint angle lies inside [lower, upper], else which joints leave them and by how much."""
+    import numpy as np
+
+    excess = np.maximum(lower - joint_pos, joint_pos - upper)  # (T, A), > 0 outside
+    bad = np.flatnonzero((excess > 0).any(axis=0))
+    if bad.size == 0:
+        return ""
+    return (f"{bad.size} joint(s) on {int((excess > 0).any(axis=1).sum())} of {len(joint_pos)} frames, "
+            f"at most {1e3 * float(excess.max()):.2f} mrad outside")

@@ -41,7 +41,7 @@ def reference_features(env, reference) -> Tensor:
     frames = qpos.shape[0]
     root_quat = qpos[:, 3:7]
     state = SimpleNamespace(  # the state attributes the terms read, as InteractionEnv._update_state sets them
-        num_envs=frames, root_pos=qpos[:, 0:3], root_quat=root_quat, root_ang_vel=qvel[:, 3:6],
+        num_envs=frames, device=qpos.device, root_pos=qpos[:, 0:3], root_quat=root_quat, root_ang_vel=qvel[:, 3:6],
         root_rotmat=quat_to_matrix(root_quat), heading_matrix=quat_to_matrix(yaw_quat(root_quat)),
         joint_pos=reference.joint_pos, default_joint_pos=env.default_joint_pos,
         joint_vel=qvel[:, torch.as_tensor(lay.actuator_dof)], body_actuator_ids=env.body_actuator_ids,

@@ -121,6 +121,7 @@ def rollout_env(setup: Setup, index: int, cfg: InteractionEnvCfg | None = None):
 
 def distil_references(setup: Setup) -> list[tuple[object, str | None]]:
     """(reference, path relative to OUT/student) per clip: the routed teacher's rollout (None: clip dropped)."""
+    from robot_hoi.student.reference_distill import FORMAT as REFERENCE_FORMAT
     from robot_hoi.student.reference_distill import load_reference, rollout_reference, save_reference
 
     folder = setup.out / "references"
@@ -129,7 +130,8 @@ def distil_references(setup: Setup) -> list[tuple[object, str | None]]:
     for i, (clip, source) in enumerate(zip(setup.clips, setup.sources, strict=True)):
         member = setup.members[setup.clip_teacher[i]]
         path = folder / f"{re.sub(r'[^A-Za-z0-9_.-]+', '_', clip.name)}.npz"
-        identity = {"source": source, "teacher": member.name, "checkpoint": str(member.checkpoint),
+        identity = {"format": REFERENCE_FORMAT, "source": source, "teacher": member.name,
+                    "checkpoint": str(member.checkpoint),
                     "checkpoint_mtime": member.checkpoint.stat().st_mtime, "min_frames": d.reference_min_frames,
                     "failure_margin": d.reference_failure_margin}
         if path.exists():

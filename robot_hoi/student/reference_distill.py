@@ -7,6 +7,12 @@ state, mapped links, object, and the simulated hand contact (supp. C: the studen
 the force detector on the distilled reference). If the teacher terminates early, the frames just before the
 failure are cut as well; a rollout shorter than `min_frames` drops the clip (the teachers filter out data too
 corrupted to imitate, supp. H). The last frame of a clip is not recorded (the env resets on reaching it).
+
+The recorded joint angles are clipped into the actuators' control range: MuJoCo's soft joint limits let a finger
+pressed open sit a fraction of a milliradian below its lower limit, and the student's (and the deployed policy's)
+PD target is these joints plus a correction (action_offset "reference"), so an unclipped reference would ask for
+an unreachable target, clamped on every tick, even for a zero action. The clip keeps 10 urad inside the limits,
+so that float32 rounding of a limit cannot put a recorded angle back outside it.
 """
 
 from __future__ import annotations
@@ -25,6 +31,8 @@ from robot_hoi.tasks.interaction.reference import ReferenceMotion, nearest_surfa
 from robot_hoi.utils.atomic import atomic_path
 from robot_hoi.utils.torch_rot import quat_apply
 
+FORMAT = 2  # 2: joint angles clipped into the control range (distilled references of format 1 are re-made)
+LIMIT_MARGIN = 1e-5  # rad
 RECORDED = ("link_pos", "link_quat_wxyz", "robot_qpos", "robot_qvel", "joint_pos", "object_pos",
             "object_quat_wxyz", "object_lin_vel", "object_ang_vel", "hand_contact")
 
@@ -42,6 +50,11 @@ class RolloutResult:
         end = "terminated" if self.terminated else "reached the end"
         return (f"{end} at frame {self.frames_reached}/{self.clip_frames}, mean reward {self.mean_reward:.3f}, "
                 f"kept {kept} frames" + (" (dropped)" if self.reference is None else ""))
+
+
+def inside_limits(joint_pos: Tensor, low: Tensor, high: Tensor) -> Tensor:
+    """Joint angles clipped into [low, high], LIMIT_MARGIN inside."""
+    return torch.maximum(torch.minimum(joint_pos, high - LIMIT_MARGIN), low + LIMIT_MARGIN)
 
 
 def _env_snapshot(env) -> dict[str, Tensor]:
@@ -83,6 +96,8 @@ def rollout_reference(env, policy: Callable[[dict[str, Tensor]], Tensor], min_fr
     if keep < min_frames:
         return RolloutResult(None, reached, total, terminated, mean_reward)
     stacked = {name: torch.stack(values[:keep]) for name, values in recorded.items()}
+    stacked["joint_pos"] = inside_limits(stacked["joint_pos"], env.ctrl_low, env.ctrl_high)
+    stacked["robot_qpos"][:, torch.as_tensor(env.layout.actuator_qpos)] = stacked["joint_pos"]
     points_world = quat_apply(stacked["object_quat_wxyz"][:, None], source.object_points[None]) + \
         stacked["object_pos"][:, None]
     reference = ReferenceMotion(

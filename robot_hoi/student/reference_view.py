@@ -24,7 +24,7 @@ class ReferenceTimeline:
     ref_* tensors, clip c covering frames clip_start[c] .. clip_end[c]), so the env's reference_at reads them."""
 
     def __init__(self, references: list[ReferenceMotion], env) -> None:
-        holder = SimpleNamespace(cfg=env.cfg, layout=env.layout)
+        holder = SimpleNamespace(cfg=env.cfg, layout=env.layout, device=env.device)
         InteractionEnv._setup_references(holder, references)
         self.tensors = vars(holder)
 

@@ -3,6 +3,10 @@ check -> deploy dry run. Small networks and few envs keep it well under 90 s on 
 
 import json
 
+import numpy as np
+
+from deploy.contract import PolicyContract
+from deploy.motion import load_motion
 from robot_hoi.cli import main
 from robot_hoi.student.checkpoint import load_student
 
@@ -34,6 +38,11 @@ def test_distil_export_check_and_dry_run(teacher_run, tmp_path, capsys):
     assert "ORT vs torch max |diff|" in printed and (tmp_path / "student.motion.npz").is_file()
     assert main(["export", "check", str(onnx_file), "--embodiment", "g1_inspire"]) == 0
     assert "policy_kind student" in capsys.readouterr().out
+    # a zero action targets the reference joints: they must be reachable, or deploy clamps every tick
+    contract = PolicyContract.from_onnx(onnx_file)
+    motion = load_motion(tmp_path / "student.motion.npz")
+    targets = np.stack([contract.action_to_target(np.zeros(contract.num_actions), q) for q in motion.joint_pos])
+    assert np.all((targets >= contract.joint_lower) & (targets <= contract.joint_upper))
 
     log_dir = tmp_path / "deploy"
     assert main(["deploy", "--dry-run", "--policy", str(onnx_file), "--duration", "5", "--auto-start",
@@ -58,7 +67,7 @@ def test_two_teachers_one_student(tmp_path, capsys):
     assert main(["train", "--data", "embedded:lift_carry", "embedded:push", "--group", "clip", "--budget", "2it",
                  "--out", str(teachers), *QUIET, "--set", "model.actor_hidden_dims=[32]",
                  "--set", "model.critic_hidden_dims=[32]"]) == 0
-    groups = sorted(p.name for p in teachers.iterdir())
+    groups = sorted(p.name for p in teachers.iterdir() if p.is_dir())
     assert len(groups) == 2
     out = tmp_path / "student"
     assert main(student_args(teachers, out, "--set", "eval_episodes=0", "--set", "distill.reference=mocap")) == 0

@@ -55,6 +55,35 @@ def test_an_early_termination_cuts_the_margin_or_drops_the_clip(scene):
     assert dropped.reference is None and "dropped" in dropped.describe()
 
 
+class FingersPastTheirLimit:
+    """The env as a teacher's rollout can see it: fingers pressed open sit 0.7 mrad below their lower limit (MuJoCo's
+    soft joint limits), which is what made every deploy tick of a distilled student clamp its targets."""
+
+    def __init__(self, env):
+        self._env = env
+        self.fingers = [i for i in range(env.num_actions) if i not in env.body_actuator_ids]
+
+    def __getattr__(self, name):
+        return getattr(self._env, name)
+
+    @property
+    def joint_pos(self):
+        q = self._env.joint_pos.clone()
+        q[:, self.fingers] = self._env.ctrl_low[self.fingers] - 7e-4
+        return q
+
+
+def test_recorded_joints_are_clipped_into_the_control_range(scene):
+    env = FingersPastTheirLimit(rollout_env(scene))
+    result = rollout_reference(env, lambda obs: torch.zeros(1, env.num_actions), min_frames=10, failure_margin=5)
+    ref = result.reference
+    # a zero action's PD target (action_offset "reference") is reachable on every frame
+    assert bool(((ref.joint_pos > env.ctrl_low) & (ref.joint_pos < env.ctrl_high)).all())
+    assert torch.allclose(ref.joint_pos[:, env.fingers], env.ctrl_low[env.fingers].expand(ref.num_frames, -1),
+                          atol=1e-4)
+    assert torch.equal(ref.robot_qpos[:, torch.as_tensor(env.layout.actuator_qpos)], ref.joint_pos)
+
+
 def test_saved_reference_round_trips_without_pickle(scene, tmp_path):
     ref = make_reference(scene, 12, drift=0.02)
     path = tmp_path / "ref.npz"
