@@ -20,7 +20,8 @@ TASK_CONFIG = CONFIGS_DIR / "tasks" / "interaction.yaml"
 def register(subparsers) -> None:
     p = subparsers.add_parser("eval", help="evaluate a checkpoint: success, duration, E_h, E_o per clip",
                               description=__doc__)
-    p.add_argument("checkpoint", help="a model_*.pt from `robot-hoi train`, or `untrained` for a baseline")
+    p.add_argument("checkpoint", help="a model_*.pt from `robot-hoi train` or `robot-hoi train student`, or "
+                                      "`untrained` for a baseline")
     p.add_argument("--data", nargs="*", default=None, help="clips (default: the ones the checkpoint trained on)")
     p.add_argument("--embodiment", default="g1_inspire")
     p.add_argument("--episodes", type=int, default=8, help="episodes per clip (run in parallel)")
@@ -52,6 +53,12 @@ def run(args: argparse.Namespace) -> int:
             from robot_hoi.errors import UserError
 
             raise UserError(f"{ckpt}: no such checkpoint")
+        from robot_hoi.student.checkpoint import is_student_checkpoint
+
+        if is_student_checkpoint(ckpt):
+            from robot_hoi.student.eval_checkpoint import run_student_eval
+
+            return run_student_eval(args, ckpt)
         model, _, _ = load_policy(ckpt)
         task = factory.read_task(ckpt) if args.data is None else None
         env_cfg = load_dataclass(InteractionEnvCfg, task["env"], f"{ckpt} task") if task else \

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import torch
 
+from robot_hoi.errors import UserError
 from robot_hoi.student.ats import AdaptiveTrajectorySampler
 from robot_hoi.student.config import SkillMimicConfig
 from robot_hoi.student.history import (
@@ -24,6 +25,21 @@ from robot_hoi.utils.atomic import atomic_path
 ENCODER_FILE = "history_encoder.pt"
 
 
+def load_history_encoder(path: Path, num_features: int, cfg: SkillMimicConfig) -> HistoryEncoder:
+    """The frozen encoder a SkillMimic-V2 run saved (OUT/history_encoder.pt), in eval mode."""
+    encoder = HistoryEncoder(num_features, cfg.history_length, cfg.history_dim)
+    try:
+        encoder.load_state_dict(torch.load(path, weights_only=True)["state"])
+    except FileNotFoundError:
+        raise UserError(f"{path}: the student's history encoder is missing (written by `robot-hoi train student` "
+                        "with SkillMimic-V2; keep the run folder together)") from None
+    except (RuntimeError, KeyError, TypeError) as exc:
+        raise UserError(f"{path}: not this student's history encoder ({type(exc).__name__}: {exc})") from None
+    encoder.eval()
+    encoder.requires_grad_(False)
+    return encoder
+
+
 class SkillMimicSetup:
     def __init__(self, cfg: SkillMimicConfig, env, out: Path, seed: int = 0) -> None:
         self.cfg, self.env = cfg, env
@@ -35,19 +51,16 @@ class SkillMimicSetup:
 
     def _history_encoder(self, path: Path, seed: int) -> HistoryEncoder:
         cfg = self.cfg
-        encoder = HistoryEncoder(self.index.numel(), cfg.history_length, cfg.history_dim)
         if path.exists():
-            encoder.load_state_dict(torch.load(path, weights_only=True)["state"])
             print(f"[skillmimic] history encoder from {path}")
-        else:
-            sequences = [reference_features(self.env, ref) for ref in self.env.references]
-            losses = pretrain(encoder, sequences, cfg, seed)
-            with atomic_path(path) as tmp:
-                torch.save({"state": encoder.state_dict(), "losses": torch.tensor(losses)}, tmp)
-            shown = f"{losses[0]:.3g} -> {losses[-1]:.3g}" if losses else "no steps"
-            print(f"[skillmimic] history encoder pre-trained by behaviour cloning ({shown}), frozen: {path}")
-        encoder.eval()
-        encoder.requires_grad_(False)
+            return load_history_encoder(path, self.index.numel(), cfg)
+        encoder = HistoryEncoder(self.index.numel(), cfg.history_length, cfg.history_dim)
+        sequences = [reference_features(self.env, ref) for ref in self.env.references]
+        losses = pretrain(encoder, sequences, cfg, seed)
+        with atomic_path(path) as tmp:
+            torch.save({"state": encoder.state_dict(), "losses": torch.tensor(losses)}, tmp)
+        shown = f"{losses[0]:.3g} -> {losses[-1]:.3g}" if losses else "no steps"
+        print(f"[skillmimic] history encoder pre-trained by behaviour cloning ({shown}), frozen: {path}")
         return encoder
 
     def providers(self) -> dict:

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import copy
 import json
+import re
 from dataclasses import asdict
 from pathlib import Path
 
@@ -81,16 +82,13 @@ def task_folder(checkpoint: Path) -> Path:
     raise UserError(f"{checkpoint}: no {TASK_FILE} beside it")
 
 
-def build_task_env(task: dict, folder: Path, env_cfg: InteractionEnvCfg | None = None,
-                   reference: str = "trained"):
-    """(InteractionEnv, clips, sources) of a student task. reference "trained": the references it trained on
-    (distilled where it had them); "mocap": the clips' MoCap retargets."""
+def task_references(task: dict, folder: Path, env_cfg: InteractionEnvCfg, reference: str = "trained"):
+    """(embodiment, clips, sources, references) of a student task. reference "trained": the references it trained
+    on (distilled where it had them); "mocap": the clips' MoCap retargets."""
     from robot_hoi.embodiment import load_embodiment
     from robot_hoi.student.reference_distill import load_reference
-    from robot_hoi.tasks.interaction.env import InteractionEnv
 
     embodiment = load_embodiment(task["embodiment"])
-    cfg = env_cfg or load_dataclass(InteractionEnvCfg, task["env"], f"{folder / TASK_FILE}")
     sources = list(task["sources"])
     clips = [factory.load_source(s) for s in sources]
     check_single_object(clips)
@@ -103,6 +101,27 @@ def build_task_env(task: dict, folder: Path, env_cfg: InteractionEnvCfg | None =
                                 "`robot-hoi train student`; keep the run folder together)")
             references.append(load_reference(path)[0])
         else:
-            references.append(mocap_reference(clip, embodiment, cfg, folder / "references"))
+            references.append(mocap_reference(clip, embodiment, env_cfg, retarget_cache(task, folder, clip)))
+    return embodiment, clips, sources, references
+
+
+def retarget_cache(task: dict, folder: Path, clip) -> Path:
+    """Where the clip's MoCap retarget is cached: the teacher run's references/ that holds it (the retarget the
+    student trained with), else the student's own references/."""
+    name = f"{re.sub(r'[^A-Za-z0-9_.-]+', '_', clip.name)}.npz"
+    for teacher in task.get("teachers", []):
+        cache = Path(teacher).parent / "references"
+        if (cache / name).is_file():
+            return cache
+    return folder / "references"
+
+
+def build_task_env(task: dict, folder: Path, env_cfg: InteractionEnvCfg | None = None,
+                   reference: str = "trained"):
+    """(InteractionEnv, clips, sources) of a student task on its `reference`s (see task_references)."""
+    from robot_hoi.tasks.interaction.env import InteractionEnv
+
+    cfg = env_cfg or load_dataclass(InteractionEnvCfg, task["env"], f"{folder / TASK_FILE}")
+    embodiment, clips, sources, references = task_references(task, folder, cfg, reference)
     env = InteractionEnv(cfg, make_scene(clips[0], embodiment, cfg), references)
     return env, clips, sources

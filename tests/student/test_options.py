@@ -68,6 +68,10 @@ def test_skillmimic_run_and_export_refusal(teacher_run, tmp_path, capsys):
     assert "Sampling/masked_frames_mean" in rows[-1]
     assert main(["export", "onnx", str(ckpt), "-o", str(tmp_path / "x.onnx")]) == 2
     assert "history" in capsys.readouterr().err and not (tmp_path / "x.onnx").exists()
+    # it evaluates with its frozen history encoder rebuilt from the run folder
+    assert main(["eval", str(ckpt), "--episodes", "1", "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["policy_kind"] == "student" and report["clips"]["synth_lift_carry_seed0"]["episodes"] == 1
 
 
 def test_ablation_run_without_reference_distillation(teacher_run, tmp_path):

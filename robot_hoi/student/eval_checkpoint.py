@@ -1,0 +1,136 @@
+"""`robot-hoi eval STUDENT_CHECKPOINT`: the teachers' metrics (success, duration, E_h, E_o, return) for a student.
+
+Same protocol as for a teacher (robot_hoi/rl/eval_cli.py): every episode from the stand at the clip start, no spawn
+noise, no PSI, deterministic actions. The student is rebuilt from its checkpoint and the task.json beside it, and
+is evaluated per clip against
+  - the MoCap retarget ("mocap"), the reference the teachers were scored on, and
+  - its distilled reference ("distilled"), when it trained on one: the reference its export deploys with.
+With --data, the given clips are evaluated against their MoCap retargets only (generalisation to unseen clips).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from robot_hoi.errors import UserError
+from robot_hoi.student.evaluation import METRICS
+
+REFERENCES = ("mocap", "distilled")
+
+
+def summarise(results: dict[str, dict[str, float]]) -> dict[str, float]:
+    """Mean over clips of each metric."""
+    return {k: sum(r[k] for r in results.values()) / max(len(results), 1) for k in METRICS}
+
+
+def student_providers(groups: list[str], env, cfg, folder: Path) -> dict:
+    """Observation providers for the student's extra actor groups (the SkillMimic-V2 history embedding)."""
+    from robot_hoi.student.history import HistoryProvider, feature_index
+    from robot_hoi.student.skillmimic import ENCODER_FILE, load_history_encoder
+    from robot_hoi.tasks.interaction.mdp.observations import student_observation_spec
+
+    providers = {}
+    for group in groups[1:]:
+        if group != "history":
+            raise UserError(f"the student reads observation group {group!r}, which evaluation cannot rebuild")
+        index = feature_index(student_observation_spec(env))
+        encoder = load_history_encoder(folder.parent / ENCODER_FILE, index.numel(), cfg.skillmimic)
+        providers[group] = HistoryProvider(encoder, index, env.num_envs)
+    return providers
+
+
+def evaluate_student(checkpoint: str | Path, data: list[str] | None = None, episodes: int = 8,
+                     seed: int = 0) -> dict[str, dict[str, dict[str, float]]]:
+    """results[reference][clip] -> metrics, reference in REFERENCES ("distilled" only where the student had one)."""
+    from robot_hoi.embodiment import load_embodiment
+    from robot_hoi.student.checkpoint import load_student
+    from robot_hoi.student.evaluation import evaluate_groups
+    from robot_hoi.student.student_env import StudentEnv
+    from robot_hoi.student.task import (
+        evaluation_cfg,
+        make_scene,
+        mocap_reference,
+        read_student_task,
+        retarget_cache,
+        task_folder,
+        task_references,
+    )
+    from robot_hoi.tasks.interaction import factory
+    from robot_hoi.tasks.interaction.env import InteractionEnv
+    from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg
+    from robot_hoi.tasks.interaction.mdp.observations import student_observation_spec
+    from robot_hoi.utils.config import load_dataclass
+
+    if episodes < 1:
+        raise UserError(f"--episodes must be at least 1, got {episodes}")
+    checkpoint = Path(checkpoint)
+    model, cfg, stored = load_student(checkpoint)
+    task = read_student_task(checkpoint)
+    folder = task_folder(checkpoint)
+    env_cfg = evaluation_cfg(load_dataclass(InteractionEnvCfg, task["env"], f"{folder}/task.json"), episodes, seed)
+    groups = list(cfg.runner.actor_obs_groups)
+    cases: list[tuple[str, object, object]] = []  # (reference kind, clip, reference motion)
+    if data:
+        embodiment = load_embodiment(task["embodiment"])
+        for source in factory.expand_sources(data):
+            clip = factory.load_source(source)
+            cache = retarget_cache(task, folder, clip)
+            cases.append(("mocap", clip, mocap_reference(clip, embodiment, env_cfg, cache)))
+    else:
+        embodiment, clips, _, mocap = task_references(task, folder, env_cfg, "mocap")
+        _, _, _, trained = task_references(task, folder, env_cfg, "trained")
+        for clip, rel, mocap_ref, trained_ref in zip(clips, task["references"], mocap, trained, strict=True):
+            cases.append(("mocap", clip, mocap_ref))
+            if rel is not None:
+                cases.append(("distilled", clip, trained_ref))
+    results: dict[str, dict[str, dict[str, float]]] = {}
+    scenes: dict[str, object] = {}
+    for kind, clip, reference in cases:
+        if clip.object_name not in scenes:
+            scenes[clip.object_name] = make_scene(clip, embodiment, env_cfg)
+        env = InteractionEnv(env_cfg, scenes[clip.object_name], [reference])
+        spec = student_observation_spec(env)
+        if spec != stored["student"].get("obs_spec", spec)[:len(spec)]:
+            raise UserError(f"{checkpoint}: the student's observation terms differ from what the task gives now; "
+                            "the observation code changed since training")
+        wrapped = StudentEnv(env, student_providers(groups, env, cfg, folder))
+        width = sum(wrapped.obs_dims[g] for g in groups)
+        if width != model.num_actor_obs:
+            raise UserError(f"{checkpoint}: the student expects {model.num_actor_obs} observations, clip "
+                            f"{clip.name} gives {width}")
+        results.setdefault(kind, {})[clip.name] = evaluate_groups(wrapped, model, groups)
+    return results
+
+
+def run_student_eval(args: argparse.Namespace, checkpoint: Path) -> int:
+    results = evaluate_student(checkpoint, args.data, args.episodes, args.seed)
+    report = {"checkpoint": str(args.checkpoint), "policy_kind": "student",
+              "clips": results["mocap"], "mean": summarise(results["mocap"])}
+    if "distilled" in results:
+        report["distilled"] = {"clips": results["distilled"], "mean": summarise(results["distilled"])}
+    if args.json:
+        print(json.dumps(report, indent=2))
+        return 0
+    from rich.console import Console
+
+    console = Console()
+    for kind, label in (("mocap", "MoCap reference"), ("distilled", "its distilled reference")):
+        if kind in results:
+            console.print(results_table(f"robot-hoi eval: {args.checkpoint} (student, {label})", results[kind]))
+    return 0
+
+
+def results_table(title: str, results: dict[str, dict[str, float]]):
+    from rich.table import Table
+
+    table = Table(title=title)
+    for col in ("clip", "episodes", "success", "duration (s)", "E_h (cm)", "E_o (cm)", "return"):
+        table.add_column(col, justify="left" if col == "clip" else "right")
+    rows = [*results.items(), ("mean", {"episodes": "", **summarise(results)})]
+    for clip, r in rows:
+        duration = f"{r['duration_s']:.2f}" + (f" / {r['clip_duration_s']:.2f}" if "clip_duration_s" in r else "")
+        table.add_row(clip, str(r["episodes"]), f"{r['success_rate']:.2f}", duration, f"{r['E_h_cm']:.1f}",
+                      f"{r['E_o_cm']:.1f}", f"{r['return']:.1f}")
+    return table
