@@ -3,12 +3,14 @@
 Writes --teachers synthetic clips (lift-carry and push, distinct seeds), then trains one teacher per clip
 (`--group clip`) with a fixed budget of --iterations PPO iterations each (plus the eval.json of each teacher),
 first one after another in this process (each teacher's physics pool uses every core), then as Ray tasks with one
-CPU each on a local Ray instance with one CPU per core (Ray's start counts: it is part of what a user waits for). Prints both wall times and teachers/hour and ends with one line:
+CPU each on a local Ray instance with one CPU per core (Ray's start counts: it is part of what a user waits
+for). Prints both wall times and teachers/hour and ends with one line:
 
     teachers_ray_speedup: <sequential wall / Ray wall>
 
-Ideal: about the core count (teachers are independent); short budgets lose some of it to Ray's start and the
-workers' imports. Example: python bench/teachers_ray.py --teachers 4 --iterations 20
+Ideal: about the core count (teachers are independent). Less in practice: the sequential teacher's physics
+already runs on every core (only the PPO update and observations are serial), and short budgets lose some of it
+to Ray's start and the workers' imports. Example: python bench/teachers_ray.py --teachers 4 --iterations 20
 """
 
 from __future__ import annotations

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import copy
 import json
+import math
 import os
 import socket
 import time
@@ -162,7 +163,7 @@ def train_teacher_group(job: TeacherJob, clips: list | None = None, log=print) -
         "samples": int(stats["samples"]),
         "train_s": float(stats["wall_s"]),
         "wall_s": time.monotonic() - started,
-        "mean_return": float(stats["mean_return"]),
+        "mean_return": _finite_or_none(stats["mean_return"]),  # none before any episode ended in this call
         "resumed_from": resumed_from,
         "checkpoint": evaluation["checkpoint"],
         "eval": evaluation["mean"],
@@ -183,6 +184,10 @@ def evaluate_group(model, clips: list, job: TeacherJob, embodiment, cache: Path)
         results[clip.name] = evaluate(factory.make_env([clip], cfg, embodiment, cache=cache), model)
     return {"episodes_per_clip": job.eval_episodes, "seed": job.eval_seed, "clips": results,
             "mean": summarise(results)}
+
+
+def _finite_or_none(value: float) -> float | None:
+    return float(value) if math.isfinite(value) else None
 
 
 def _trim_scalars(path: Path, last_step: int) -> None:
@@ -220,9 +225,13 @@ def format_line(summary: dict[str, Any]) -> str:
     """One progress line per finished teacher."""
     ev = summary["eval"]
     resumed = "" if summary["resumed_from"] is None else f" (resumed at {summary['resumed_from']})"
-    return (f"{summary['group']}: it {summary['iteration']}{resumed}, return {summary['mean_return']:.3g}, "
+    return (f"{summary['group']}: it {summary['iteration']}{resumed}, return {_number(summary['mean_return'])}, "
             f"success {ev['success_rate']:.2f}, E_h {ev['E_h_cm']:.1f} cm, E_o {ev['E_o_cm']:.1f} cm, "
             f"{summary['wall_s']:.0f} s on {summary['host']}")
+
+
+def _number(value: float | None) -> str:
+    return "-" if value is None else f"{value:.3g}"
 
 
 def print_summary(summaries: dict[str, dict], failures: dict[str, str], title: str) -> None:
@@ -237,7 +246,7 @@ def print_summary(summaries: dict[str, dict], failures: dict[str, str], title: s
                          no_wrap=col == "teacher", min_width=len(col))
     for name, s in summaries.items():
         ev = s["eval"]
-        table.add_row(name, str(s["iteration"]), f"{s['mean_return']:.3g}", f"{ev['success_rate']:.2f}",
+        table.add_row(name, str(s["iteration"]), _number(s["mean_return"]), f"{ev['success_rate']:.2f}",
                       f"{ev['duration_s']:.2f}", f"{ev['E_h_cm']:.1f}", f"{ev['E_o_cm']:.1f}", f"{s['wall_s']:.0f}")
     for name in failures:
         table.add_row(name, "-", "failed", *[""] * 5)
