@@ -35,9 +35,10 @@ def run_student_export(args: argparse.Namespace, ckpt: Path) -> int:
 
     model, cfg, data = load_student(ckpt)
     if model.layout.obs_dim != data["dims"]["actor_obs"] or cfg.runner.actor_obs_groups != ["student"]:
-        raise UserError(f"{ckpt}: this student also reads {cfg.runner.actor_obs_groups[1:]} (e.g. the SkillMimic-V2 "
-                        "history embedding), which the deploy contract does not carry; train it with "
-                        "--set skillmimic.history=false to export it")
+        raise UserError(f"{ckpt}: this student also reads {cfg.runner.actor_obs_groups[1:]} (the SkillMimic-V2 "
+                        "history embedding); the deploy contract has no history observation yet, so it cannot be "
+                        "exported: train a deployable one with --option skillmimic_deployable "
+                        "(= --set skillmimic.history=false)")
     task = read_student_task(ckpt)
     folder = task_folder(ckpt)
     env_cfg = load_dataclass(InteractionEnvCfg, task["env"], f"{folder}/task.json")

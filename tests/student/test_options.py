@@ -8,6 +8,7 @@ import torch
 from robot_hoi.cli import main
 from robot_hoi.errors import UserError
 from robot_hoi.student.config import STUDENT_FAST_CONFIG, load_student_config, option_overrides
+from robot_hoi.student.teachers import latest_checkpoint
 
 from .conftest import student_args
 
@@ -52,6 +53,8 @@ def test_complexmimic_run(teacher_run, tmp_path, capsys):
     assert task["clip_teacher"] == [info["expert"]]
     rows = [json.loads(line) for line in (out / "student" / "scalars.jsonl").read_text().splitlines()]
     assert "Distill/kl" in rows[-1] and any("Sampling/max_probability" in r for r in rows)
+    # the height map is the interaction expert's: the student reads the deployable observation and exports
+    export_and_check(latest_checkpoint(out / "student"), tmp_path / "cm.onnx", capsys)
 
 
 def test_skillmimic_run_and_export_refusal(teacher_run, tmp_path, capsys):
@@ -67,14 +70,15 @@ def test_skillmimic_run_and_export_refusal(teacher_run, tmp_path, capsys):
     rows = [json.loads(line) for line in (out / "student" / "scalars.jsonl").read_text().splitlines()]
     assert "Sampling/masked_frames_mean" in rows[-1]
     assert main(["export", "onnx", str(ckpt), "-o", str(tmp_path / "x.onnx")]) == 2
-    assert "history" in capsys.readouterr().err and not (tmp_path / "x.onnx").exists()
+    err = capsys.readouterr().err
+    assert "no history observation" in err and "skillmimic_deployable" in err and not (tmp_path / "x.onnx").exists()
     # it evaluates with its frozen history encoder rebuilt from the run folder
     assert main(["eval", str(ckpt), "--episodes", "1", "--json"]) == 0
     report = json.loads(capsys.readouterr().out)
     assert report["policy_kind"] == "student" and report["clips"]["synth_lift_carry_seed0"]["episodes"] == 1
 
 
-def test_ablation_run_without_reference_distillation(teacher_run, tmp_path):
+def test_ablation_run_without_reference_distillation(teacher_run, tmp_path, capsys):
     out = tmp_path / "ppo"
     assert main(student_args(teacher_run, out, "--option", "no_reference_distillation", "--option", "ppo_only",
                              "--set", "eval_episodes=0")) == 0
@@ -82,6 +86,16 @@ def test_ablation_run_without_reference_distillation(teacher_run, tmp_path):
     assert task["references"] == [None] and not (out / "references").exists()
     rows = [json.loads(line) for line in (out / "student" / "scalars.jsonl").read_text().splitlines()]
     assert [r["Distill/w_distill"] for r in rows] == [0.0, 0.0] and rows[0]["Distill/student_fraction"] == 1.0
+    export_and_check(out / "student" / "model_2.pt", tmp_path / "ppo.onnx", capsys)
+    assert "284 frames" in capsys.readouterr().out  # the sidecar is the whole MoCap retarget
+
+
+def export_and_check(ckpt, onnx_file, capsys):
+    assert main(["export", "onnx", str(ckpt), "-o", str(onnx_file), "--recorded", "32"]) == 0
+    assert main(["export", "check", str(onnx_file), "--embodiment", "g1_inspire"]) == 0
+    printed = capsys.readouterr().out
+    assert "policy_kind student" in printed and "matches embodiment g1_inspire" in printed
+    print(printed)  # for the caller
 
 
 def test_deployable_skillmimic_student_exports(teacher_run, tmp_path, capsys):
@@ -91,7 +105,4 @@ def test_deployable_skillmimic_student_exports(teacher_run, tmp_path, capsys):
     rows = [json.loads(line) for line in (out / "student" / "scalars.jsonl").read_text().splitlines()]
     assert [r["Distill/w_ppo"] for r in rows] == [0.0, 0.0] and [r["Distill/w_distill"] for r in rows] == [1.0, 1.0]
     assert all("Sampling/masked_frames_mean" in r for r in rows) and not (out / "history_encoder.pt").exists()
-    onnx_file = tmp_path / "smd.onnx"
-    assert main(["export", "onnx", str(out / "student" / "model_2.pt"), "-o", str(onnx_file), "--recorded", "32"]) == 0
-    assert main(["export", "check", str(onnx_file)]) == 0
-    assert "policy_kind student" in capsys.readouterr().out
+    export_and_check(out / "student" / "model_2.pt", tmp_path / "smd.onnx", capsys)
