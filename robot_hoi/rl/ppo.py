@@ -51,6 +51,9 @@ class PPO:
         self.storage: RolloutStorage | None = None
         self.surrogate_coef = 1.0
         self.extra_actor_loss: ExtraActorLoss | None = None
+        # called with every parameter after backward, before clipping: e.g. the gradient all-reduce of
+        # data-parallel training (robot_hoi/student/distributed.py)
+        self.gradient_hook: Callable[[list[Tensor]], None] | None = None
         self._pending: dict | None = None
 
     # --- rollout ---------------------------------------------------------------------------------------------
@@ -186,6 +189,8 @@ class PPO:
         self.actor_optimizer.zero_grad(set_to_none=True)
         self.critic_optimizer.zero_grad(set_to_none=True)
         (actor_loss + value_loss).backward()  # disjoint parameters: each loss reaches only its own network
+        if self.gradient_hook is not None:
+            self.gradient_hook(self.actor_params + self.critic_params)
         max_norm = cfg.max_grad_norm if cfg.max_grad_norm is not None else float("inf")
         actor_grad = torch.nn.utils.clip_grad_norm_(self.actor_params, max_norm)
         critic_grad = torch.nn.utils.clip_grad_norm_(self.critic_params, max_norm)
