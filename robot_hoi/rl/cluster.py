@@ -82,6 +82,7 @@ def teacher_task(job: TeacherJob, clips: list, storage: str, seed_archive: bytes
         summary = train_teacher_group(job.at(staging), clips)
         summary.update(storage="local", archive=pack_folder(staging))
         shutil.rmtree(staging, ignore_errors=True)
+        _remove_if_empty(staging.parent)  # the invocation's folder, once its last group has gone
         return summary
     except Exception as exc:
         if getattr(exc, "user_error", False):
@@ -98,6 +99,13 @@ def sees_driver_folder(out_dir: Path, token: str) -> bool:
 
 def staging_dir(job: TeacherJob) -> Path:
     return Path(tempfile.gettempdir()) / STAGING_DIRNAME / job.run_token / job.group
+
+
+def _remove_if_empty(folder: Path) -> None:
+    try:
+        folder.rmdir()
+    except OSError:
+        pass  # not empty (another group of this run) or already gone
 
 
 def _prepare_staging(staging: Path, token: str, seed_archive: bytes | None) -> None:
@@ -150,10 +158,7 @@ def unpack_into(archive: bytes, target: Path, keep: tuple[str, ...] = NOT_SHIPPE
                 path.rmdir()
     finally:
         shutil.rmtree(incoming, ignore_errors=True)
-        try:
-            incoming_root.rmdir()
-        except OSError:
-            pass  # another group is unpacking
+        _remove_if_empty(incoming_root)
 
 
 # --- driver side ------------------------------------------------------------------------------------------------

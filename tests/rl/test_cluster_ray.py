@@ -79,7 +79,7 @@ def test_workers_without_shared_storage_ship_results_back(local_ray, tmp_path, m
     assert (folder / "model_2.pt").is_file() and (folder / "eval.json").is_file()
     assert (folder / "job_state.json").is_file() and _steps(folder) == [1, 2]
     assert not (folder / "references").exists()  # the retarget cache stays behind
-    assert not Path(summary["run_dir"]).exists()  # the worker cleaned its staging folder up
+    assert not Path(summary["run_dir"]).parent.exists()  # the worker cleaned its staging folder up
     assert not (out / INCOMING_DIRNAME).exists()
 
     # --resume sends the driver's copy to the worker, which continues from it
