@@ -4,7 +4,10 @@ iterations from the episodes that ended."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import torch
+from torch import Tensor
 
 from robot_hoi.student.config import ComplexMimicConfig
 from robot_hoi.student.difficulty import DifficultyAwareSampler
@@ -12,8 +15,11 @@ from robot_hoi.student.samplers import StartSampler
 
 
 class DifficultySetup:
-    def __init__(self, cfg: ComplexMimicConfig, group_of: list[int], seed: int = 0) -> None:
+    def __init__(self, cfg: ComplexMimicConfig, group_of: list[int], seed: int = 0,
+                 reduce: Callable[[Tensor], Tensor] | None = None) -> None:
+        """reduce: sums over data-parallel ranks (None: one process)."""
         self.cfg = cfg
+        self.reduce = reduce
         self.sampler = DifficultyAwareSampler(group_of, cfg)
         self.generator = torch.Generator().manual_seed(seed + 104729)
 
@@ -30,6 +36,6 @@ class DifficultySetup:
         every = self.cfg.update_every
 
         def update(iteration: int) -> dict[str, float] | None:
-            return das.update() if iteration > 0 and iteration % every == 0 else None
+            return das.update(self.reduce) if iteration > 0 and iteration % every == 0 else None
 
         runner.iteration_hooks.append(update)

@@ -19,6 +19,8 @@ uniform; without the learnability filter s(m) = D(m). The evaluation is the trai
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import torch
 from torch import Tensor
 
@@ -94,8 +96,12 @@ class DifficultyAwareSampler:
         self._returns.index_add_(0, clip, batch.ret.float())
         self._episodes.index_add_(0, clip, torch.ones(clip.numel()))
 
-    def update(self) -> dict[str, float]:
-        """Fold the window into D and I (motions without episodes keep theirs); returns scalars to log."""
+    def update(self, reduce: Callable[[Tensor], Tensor] | None = None) -> dict[str, float]:
+        """Fold the window into D and I (motions without episodes keep theirs); returns scalars to log.
+        `reduce` sums a tensor over data-parallel ranks, so every rank folds all ranks' episodes."""
+        if reduce is not None:
+            window = reduce(torch.stack([self._failures, self._returns, self._episodes]))
+            self._failures, self._returns, self._episodes = window[0], window[1], window[2]
         seen = self._episodes > 0
         count = self._episodes.clamp(min=1)
         failure, mean_return = self._failures / count, self._returns / count

@@ -67,14 +67,15 @@ def train_expert(setup, run: TeacherRun, clip_ids: list[int], kind: str, budget,
         train_cfg.runner.actor_obs_groups = [*run.train_cfg.runner.actor_obs_groups, "height_map"]
         train_cfg.runner.critic_obs_groups = [*run.train_cfg.runner.critic_obs_groups, "height_map"]
     wrapped = StudentEnv(env, providers)
-    factory.write_task(folder, [setup.sources[i] for i in clip_ids], env_cfg, setup.embodiment.name,
-                       f"{run.name}-{kind}")
-    runner = OnPolicyRunner(wrapped, train_cfg, folder, device=setup.device)
     existing = latest_checkpoint(folder)
-    if existing is not None:
+    if existing is not None:  # loaded without a log folder: reusing an expert writes nothing
+        runner = OnPolicyRunner(wrapped, train_cfg, None, device=setup.device)
         runner.load(existing)
         print(f"[complexmimic] {run.name} {kind} expert from {existing}")
     else:
+        factory.write_task(folder, [setup.sources[i] for i in clip_ids], env_cfg, setup.embodiment.name,
+                           f"{run.name}-{kind}")
+        runner = OnPolicyRunner(wrapped, train_cfg, folder, device=setup.device)
         if kind == "imitation":
             runner.model.load_state_dict(run.model.state_dict())
         elif cm.interaction_init == "teacher":
@@ -93,8 +94,9 @@ def train_expert(setup, run: TeacherRun, clip_ids: list[int], kind: str, budget,
                          {"height_map": height_map} if kind == "interaction" else {})
 
 
-def prepare_experts(setup, budget, resume: bool = False) -> None:
-    """Replace setup.members by two experts per teacher and route every clip (setup.clip_teacher/clip_group)."""
+def prepare_experts(setup, budget, resume: bool = False, write: bool = True) -> None:
+    """Replace setup.members by two experts per teacher and route every clip (setup.clip_teacher/clip_group).
+    Experts already in OUT/experts are reused; `write` False leaves routing.json alone (ranks other than 0)."""
     from robot_hoi.student.pipeline import scale_budget
     from robot_hoi.tasks.interaction.env import InteractionEnv
 
@@ -117,6 +119,7 @@ def prepare_experts(setup, budget, resume: bool = False) -> None:
                                             "group": KINDS[group], "expert": experts[group].name}
     setup.members, setup.clip_teacher, setup.clip_group = members, clip_teacher, clip_group
     setup.task_extra["routing"] = routing
-    atomic_write_text(setup.out / "routing.json", json.dumps(routing, indent=2) + "\n")
+    if write:
+        atomic_write_text(setup.out / "routing.json", json.dumps(routing, indent=2) + "\n")
     for clip, info in routing.items():
         print(f"[complexmimic] {clip}: imitation expert success {info['imitation_success']:.2f} -> {info['expert']}")

@@ -5,6 +5,10 @@
     robot-hoi train student --teachers runs/teachers --option complexmimic --set complexmimic.update_every=20
     robot-hoi train student --teachers runs/teachers --option skillmimic_deployable --resume
     robot-hoi export onnx runs/student/student/model_<it>.pt -o policies/student.onnx
+    robot-hoi train student --teachers runs/teachers --device cuda --budget 1h   # one rank per CUDA device
+
+With several ranks (robot_hoi/student/launch.py, distributed.py) every rank runs `train` with its own envs; rank 0
+alone writes, the others only compute.
 
 Run folder OUT/: student/ (checkpoints, task.json, TensorBoard, scalars.jsonl, eval.json), references/ (distilled
 references, reused on --resume), and with ComplexMimic experts/<group>/{imitation,interaction}/ and routing.json,
@@ -16,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import re
 import time
 from dataclasses import dataclass, field, replace
@@ -27,6 +32,7 @@ from robot_hoi.errors import UserError
 from robot_hoi.paths import REPO_ROOT
 from robot_hoi.rl.budget import Budget, parse_budget
 from robot_hoi.student.config import PRESETS, StudentTrainConfig, load_student_config
+from robot_hoi.student.distributed import Rank, SharedBudget, state_checksum, sum_over_ranks
 from robot_hoi.student.reference_view import ReferenceTimeline, ReferenceView
 from robot_hoi.student.task import (
     STUDENT_GROUP,
@@ -153,9 +159,21 @@ def distil_references(setup: Setup) -> list[tuple[object, str | None]]:
     return results
 
 
-def build_student(setup: Setup, args: argparse.Namespace):
-    """The student env (with the options' providers and samplers) and its DistillationRunner."""
-    from robot_hoi.student.runner import DistillationRunner
+@dataclass
+class StudentParts:
+    """The student env and what the runner is built from."""
+
+    student_env: object  # StudentEnv
+    composite: CompositeTeacher
+    layout: object  # TokenLayout
+    spec: list[dict]
+    keep: list[int]  # indices of the clips kept (a dropped clip had no usable teacher rollout)
+    options: list = field(default_factory=list)  # option setups, attached to the runner once it exists
+
+
+def student_environment(setup: Setup, write: bool = True) -> StudentParts:
+    """The student env (with the options' providers): distils (or reuses) the references, pre-trains (or loads) the
+    SkillMimic-V2 history encoder and, with `write`, records the task in OUT/student/task.json."""
     from robot_hoi.student.student_env import StudentEnv
     from robot_hoi.student.tokens import token_layout
     from robot_hoi.tasks.interaction.env import InteractionEnv
@@ -190,57 +208,115 @@ def build_student(setup: Setup, args: argparse.Namespace):
     spec = student_observation_spec(env) + spec_extra
     layout = token_layout(spec, setup.env_cfg.student_keyframes)
     cfg.runner.actor_obs_groups = ["student", *providers]
-    sources = [setup.sources[i] for i in keep]
-    folder = setup.out / STUDENT_GROUP
-    folder.mkdir(parents=True, exist_ok=True)
-    task_extra = {**setup.task_extra, "teachers": [str(r.checkpoint) for r in setup.runs],
-                  "clip_teacher": [setup.members[setup.clip_teacher[i]].name for i in keep],
-                  "dropped_clips": [setup.sources[i] for i in range(len(setup.sources)) if i not in keep]}
-    write_student_task(folder, sources=sources, references=[distilled[i][1] for i in keep], env_cfg=setup.env_cfg,
-                       embodiment_name=setup.embodiment.name, extra=task_extra)
+    if write:
+        folder = setup.out / STUDENT_GROUP
+        folder.mkdir(parents=True, exist_ok=True)
+        task_extra = {**setup.task_extra, "teachers": [str(r.checkpoint) for r in setup.runs],
+                      "clip_teacher": [setup.members[setup.clip_teacher[i]].name for i in keep],
+                      "dropped_clips": [setup.sources[i] for i in range(len(setup.sources)) if i not in keep]}
+        write_student_task(folder, sources=[setup.sources[i] for i in keep],
+                           references=[distilled[i][1] for i in keep], env_cfg=setup.env_cfg,
+                           embodiment_name=setup.embodiment.name, extra=task_extra)
+    return StudentParts(student_env, composite, layout, spec, keep, options)
+
+
+def build_student(setup: Setup, args: argparse.Namespace, rank: Rank | None = None):
+    """The student env (with the options' providers and samplers) and its DistillationRunner, as `rank` of a
+    data-parallel group (default: a single process). Only rank 0 logs and writes."""
+    from robot_hoi.student.runner import DistillationRunner
+
+    rank = rank or Rank()
+    cfg = setup.cfg
+    parts = student_environment(setup, write=rank.is_main)
+    if not rank.is_main:
+        cfg.runner.progress = False
+    sources = [setup.sources[i] for i in parts.keep]
     torch.manual_seed(cfg.seed)
-    runner = DistillationRunner(student_env, cfg, composite, layout, folder, device=setup.device,
-                                student_info={"obs_spec": spec, "keyframes": list(setup.env_cfg.student_keyframes),
-                                              "sources": sources})
+    runner = DistillationRunner(parts.student_env, cfg, parts.composite, parts.layout,
+                                setup.out / STUDENT_GROUP if rank.is_main else None, device=setup.device,
+                                student_info={"obs_spec": parts.spec, "sources": sources,
+                                              "keyframes": list(setup.env_cfg.student_keyframes)})
+    options = list(parts.options)
     if cfg.complexmimic.enabled and cfg.complexmimic.sampling:
         from robot_hoi.student import complexmimic
 
-        options.append(complexmimic.DifficultySetup(cfg.complexmimic, [setup.clip_group[i] for i in keep], cfg.seed))
+        reduce = sum_over_ranks(rank.device) if rank.distributed else None  # every rank's episodes
+        options.append(complexmimic.DifficultySetup(cfg.complexmimic, [setup.clip_group[i] for i in parts.keep],
+                                                    cfg.seed, reduce=reduce))
     for option in options:
-        option.attach(runner, student_env)
-    return runner, student_env, keep
+        option.attach(runner, parts.student_env)
+    runner.data_parallel(rank)
+    return runner, parts.student_env, parts.keep
 
 
-def run(args: argparse.Namespace) -> int:
-    from robot_hoi.student.teachers import latest_checkpoint
-
-    torch.set_num_threads(max(getattr(args, "torch_threads", 1), 1))
+def prepare_run(args: argparse.Namespace, rank: Rank | None = None) -> tuple[Setup, Budget]:
+    """Teachers, config and (ComplexMimic) experts; the student's share of the budget."""
+    rank = rank or Rank()
     setup = prepare(args)
+    if rank.distributed:
+        setup.device = rank.device
+        setup.env_cfg.seed += rank.rank  # each rank its own envs
+        if setup.env_cfg.nthread is None:  # the ranks share the cores
+            setup.env_cfg.nthread = max(1, (os.cpu_count() or 1) // rank.world_size)
     budget = parse_budget(args.budget)
-    print(f"student from {len(setup.runs)} teacher(s) on {len(setup.clips)} clip(s) -> {setup.out}")
+    if rank.is_main:
+        print(f"student from {len(setup.runs)} teacher(s) on {len(setup.clips)} clip(s) -> {setup.out}")
     if setup.cfg.complexmimic.enabled:
         from robot_hoi.student.experts import prepare_experts
 
         expert_budget = scale_budget(budget, setup.cfg.complexmimic.expert_budget_fraction)
         budget = scale_budget(budget, 1.0 - setup.cfg.complexmimic.expert_budget_fraction)
-        prepare_experts(setup, expert_budget, resume=args.resume)
-    runner, student_env, keep = build_student(setup, args)
+        prepare_experts(setup, expert_budget, resume=args.resume, write=rank.is_main)
+    return setup, budget
+
+
+def run(args: argparse.Namespace) -> int:
+    from robot_hoi.student.launch import resolve_nproc, train_distributed
+
+    torch.set_num_threads(max(getattr(args, "torch_threads", 1), 1))
+    nproc = resolve_nproc(args)
+    if nproc > 1:
+        train_distributed(args, nproc)
+    else:
+        train(args)
+    return 0
+
+
+def train(args: argparse.Namespace, rank: Rank | None = None) -> dict:
+    """Train the student in this process (as `rank` of a data-parallel group, or alone); rank 0 evaluates it.
+    Returns this rank's report: samples it collected, the run's total, its parameter checksum, what it saved."""
+    from robot_hoi.student.teachers import latest_checkpoint
+
+    rank = rank or Rank()
+    setup, budget = prepare_run(args, rank)
+    runner, student_env, keep = build_student(setup, args, rank)
     folder = setup.out / STUDENT_GROUP
     if args.resume:
         latest = latest_checkpoint(folder)
         if latest is not None:
             runner.resume(latest)
-            print(f"[student] resumed from {latest} (iteration {runner.iteration})")
-    print(f"[student] obs {student_env.obs_dims}, {student_env.num_envs} envs, "
-          f"{sum(p.numel() for p in runner.model.actor.parameters()):,} actor parameters")
-    stats = runner.learn(budget)
+            if rank.is_main:
+                print(f"[student] resumed from {latest} (iteration {runner.iteration})")
+    if rank.is_main:
+        ranks = f" x {rank.world_size} ranks" if rank.distributed else ""
+        print(f"[student] obs {student_env.obs_dims}, {student_env.num_envs} envs{ranks}, "
+              f"{sum(p.numel() for p in runner.model.actor.parameters()):,} actor parameters")
+    stats = runner.learn(SharedBudget(budget, rank.world_size, rank.device) if rank.distributed else budget)
     runner.close()
+    close = getattr(student_env.env.backend, "close", None)
+    if close is not None:  # its physics threads stop now (the runner lives on in a reference cycle)
+        close()
+    report = {"rank": rank.rank, "world_size": rank.world_size, "samples": runner.rank_samples,
+              "total_samples": runner.total_samples, "iteration": runner.iteration,
+              "checksum": state_checksum(runner.model), "checkpoints": [str(p) for p in runner.saved_checkpoints]}
+    if not rank.is_main:
+        return report
     print(f"[student] {({k: round(v, 3) for k, v in stats.items()})}")
     if setup.cfg.eval_episodes > 0:
-        report = evaluate_run(setup, runner, keep)
-        atomic_write_text(folder / "eval.json", json.dumps(report, indent=2) + "\n")
+        evaluation = evaluate_run(setup, runner, keep)
+        atomic_write_text(folder / "eval.json", json.dumps(evaluation, indent=2) + "\n")
     print(f"done: {folder}")
-    return 0
+    return report
 
 
 def evaluate_run(setup: Setup, runner, keep: list[int]) -> dict:

@@ -6,6 +6,8 @@ sample (PPO.act) and the teacher's mean and std; the actor minimises w_PPO * L_P
 (PPO.surrogate_coef and PPO.extra_actor_loss) and the critic learns the env's (teacher) reward throughout.
 Checkpoints, resume, TensorBoard and progress come from OnPolicyRunner; a student checkpoint is a PPO checkpoint
 with policy_kind "student", the token layout and the task, plus the samplers' state for an exact resume.
+With `data_parallel(rank)` it is one of several processes training one model (robot_hoi/student/distributed.py);
+total_samples then counts every rank's samples, rank_samples this process's.
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ from torch import Tensor
 from robot_hoi.errors import UserError
 from robot_hoi.rl.checkpoint import save_checkpoint
 from robot_hoi.rl.logger import LogWriter
+from robot_hoi.rl.normalizer import RunningNormalizer
 from robot_hoi.rl.ppo import PPO
 from robot_hoi.rl.runner import OnPolicyRunner
 from robot_hoi.student.config import StudentTrainConfig
@@ -30,6 +33,7 @@ from robot_hoi.student.distill import (
     mix_actions,
     student_probability,
 )
+from robot_hoi.student.distributed import GradientAverage, Rank, SyncedNormalizer, broadcast_state
 from robot_hoi.student.model import StudentActorCritic
 from robot_hoi.student.teachers import CompositeTeacher
 from robot_hoi.student.tokens import TokenLayout
@@ -68,6 +72,9 @@ class DistillationRunner(OnPolicyRunner):
         self._student_probability = 1.0
         self._weights = (1.0, 0.0)
         self._hook_scalars: dict[str, float] = {}
+        self.rank = Rank()
+        self.rank_samples = 0  # samples this process collected (all ranks: total_samples)
+        self.saved_checkpoints: list[Path] = []
         self._reset_stats()
 
     def _reset_stats(self) -> None:
@@ -75,6 +82,32 @@ class DistillationRunner(OnPolicyRunner):
         self._executed_total = 0
         self._distill_sum = 0.0
         self._distill_count = 0
+
+    # --- data parallel (robot_hoi/student/distributed.py) --------------------------------------------------------
+    def data_parallel(self, rank: Rank) -> None:
+        """Train as `rank` of its process group: gradients and normaliser statistics shared with the other ranks,
+        rank 0's parameters to start from, this rank's own action noise and DAgger draws."""
+        self.rank = rank
+        if not rank.distributed:
+            return
+        if self.cfg.ppo.desired_kl is not None:
+            raise UserError("ppo.desired_kl (a KL-adaptive learning rate) with more than one process: each rank "
+                            "would adapt its own rate from its own minibatches; use a fixed rate "
+                            "(--set ppo.desired_kl=null, as the student presets do)")
+        model = self.model
+        if isinstance(model.actor_normalizer, RunningNormalizer):
+            model.actor_normalizer = SyncedNormalizer.replacing(model.actor_normalizer)
+            model.critic_normalizer = SyncedNormalizer.replacing(model.critic_normalizer)
+        self.alg.gradient_hook = GradientAverage(rank.world_size)
+        self._start_ranks_together()
+
+    def _start_ranks_together(self) -> None:
+        broadcast_state(self.model)
+        torch.manual_seed(self.cfg.seed + 7919 * self.rank.rank + self.iteration)
+        for obj in self.stateful.values():  # samplers restored from rank 0's checkpoint draw their own starts
+            generator = getattr(obj, "generator", None)
+            if isinstance(generator, torch.Generator) and not self.rank.is_main:
+                generator.manual_seed(self.cfg.seed + 104729 * self.rank.rank + self.iteration)
 
     # --- Alg. 1 ------------------------------------------------------------------------------------------------
     def _on_iteration_start(self) -> None:
@@ -126,11 +159,19 @@ class DistillationRunner(OnPolicyRunner):
             **self._hook_scalars,
         }
         self._reset_stats()
+        batch = self.alg.storage.batch_size
+        self.rank_samples += batch
+        if self.rank.distributed:  # the loop counted this rank's batch; every rank collected one
+            self.total_samples += batch * (self.rank.world_size - 1)
+            scalars["Perf/ranks"] = float(self.rank.world_size)
+            scalars["Perf/samples_per_s_all_ranks"] = self.rank.world_size * batch / max(collection_s + learning_s,
+                                                                                         1e-9)
         super()._log(stats, {**env_logs, **scalars}, collection_s, learning_s)
 
     # --- checkpoints ---------------------------------------------------------------------------------------------
     def save(self, path: str | Path) -> Path:
         git = self._git()
+        self.saved_checkpoints.append(Path(path))
         return save_checkpoint(path, {
             "policy_kind": POLICY_KIND,
             "model": self.model.state_dict(),
@@ -162,3 +203,5 @@ class DistillationRunner(OnPolicyRunner):
         for name, obj in self.stateful.items():
             if name in states:
                 obj.load_state_dict(states[name])
+        if self.rank.distributed:
+            self._start_ranks_together()
