@@ -45,6 +45,11 @@ class Rank:
     def distributed(self) -> bool:
         return self.world_size > 1
 
+    def wait_for_all(self) -> None:
+        """Return once every rank is here (after its last collective: the group may then be torn down)."""
+        if self.distributed:
+            dist.barrier()
+
 
 def default_nproc() -> int:
     """The number of CUDA devices when there are several, else 1."""

@@ -103,7 +103,6 @@ def _worker(rank: int, world_size: int, rendezvous: str, args: argparse.Namespac
                                 world_size=world_size)
         try:
             queue.put(train(args, Rank(rank, world_size, device)))
-            dist.barrier()  # nobody tears the group down while another rank is still in a collective
         finally:
             dist.destroy_process_group()
             # objects in reference cycles (runner <-> PPO hooks) hold physics thread pools: free them now, not

@@ -302,6 +302,7 @@ def train(args: argparse.Namespace, rank: Rank | None = None) -> dict:
         print(f"[student] obs {student_env.obs_dims}, {student_env.num_envs} envs{ranks}, "
               f"{sum(p.numel() for p in runner.model.actor.parameters()):,} actor parameters")
     stats = runner.learn(SharedBudget(budget, rank.world_size, rank.device) if rank.distributed else budget)
+    rank.wait_for_all()  # the last collective is behind every rank; rank 0's evaluation needs none
     runner.close()
     close = getattr(student_env.env.backend, "close", None)
     if close is not None:  # its physics threads stop now (the runner lives on in a reference cycle)

@@ -103,3 +103,13 @@ def test_each_rank_has_its_own_envs(teacher_run, tmp_path):
         assert setup.env_cfg.seed == setup.teacher_env_cfg.seed + rank
         first.append(student_environment(setup, write=False).student_env.reset()["critic"])
     assert not torch.allclose(first[0], first[1])
+
+
+def test_a_rank_that_refuses_its_settings_stops_the_run_with_its_message(teacher_run, tmp_path):
+    from robot_hoi.student.pipeline import run
+
+    args = build_parser().parse_args(student_args(teacher_run, tmp_path / "kl", "--set", "ppo.desired_kl=0.01"))
+    args.nproc = 2
+    with pytest.raises(UserError, match=r"rank \d: ppo.desired_kl .* each rank would adapt its own rate"):
+        run(args)
+    assert not list((tmp_path / "kl" / "student").glob("model_*.pt"))
