@@ -33,7 +33,15 @@ def register(subparsers) -> None:
     p.add_argument("--set", dest="overrides", action="append", default=[],
                    help="override, e.g. --set env.num_envs=128 --set ppo.actor_lr=1e-4 (repeatable)")
     p.add_argument("--resume", action="store_true", help="continue each group from its latest checkpoint")
-    p.add_argument("--device", default="cpu")
+    p.add_argument("--backend", default=None, choices=["auto", "cpu", "warp"],
+                   help="physics: cpu (mujoco.rollout), warp (MuJoCo Warp; a GPU, or warp's CPU device) or auto "
+                        "(warp when a CUDA device is present); default: the task config's (auto) for teachers, "
+                        "cpu for the student")
+    p.add_argument("--device", default="auto",
+                   help="policy/PPO device: cpu, cuda[:N] or auto (where the physics runs; cuda under a Ray GPU)")
+    p.add_argument("--nproc", type=int, default=None,
+                   help="student: data-parallel processes (default: the CUDA devices with --device cuda when more "
+                        "than one, else 1)")
     p.add_argument("--torch-threads", type=int, default=1,
                    help="torch CPU threads (default 1: the physics pool owns the cores; small-batch ops lose "
                         "more to thread hand-offs than they gain)")
@@ -59,12 +67,19 @@ def register(subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.backend is not None:
+        args.overrides = [*args.overrides, f"env.backend={args.backend}"]
     if args.stage == "student":
         if args.cluster != "none":
             from robot_hoi.errors import UserError
 
             raise UserError("--cluster trains teachers; the student trains here (drop --cluster)")
+        import torch
+
         from robot_hoi.student.pipeline import run as train_student
+
+        if args.device == "auto":
+            args.device = "cuda" if torch.cuda.is_available() else "cpu"
 
         return train_student(args)
     import json

@@ -127,7 +127,7 @@ def train_teacher_group(job: TeacherJob, clips: list | None = None, log=print) -
 
     torch.manual_seed(job.train_cfg.seed)
     env = factory.make_env(clips, job.env_cfg, embodiment, cache=run_dir / "references")
-    runner = OnPolicyRunner(env, job.train_cfg, run_dir, device=job.device)
+    runner = OnPolicyRunner(env, job.train_cfg, run_dir, device=policy_device(job.device, env.device))
     resumed_from = None
     if resume_from is not None:
         runner.resume(resume_from)
@@ -254,3 +254,14 @@ def print_summary(summaries: dict[str, dict], failures: dict[str, str], title: s
     console.print(table)
     for name, error in failures.items():
         console.print(f"{name}: {error}", markup=False, highlight=False)
+
+
+def policy_device(requested: str, env_device):
+    """`auto`: the physics' device when it is a GPU, else a CUDA device when there is one, else the CPU."""
+    import torch
+
+    if requested != "auto":
+        return torch.device(requested)
+    if env_device.type == "cuda":
+        return env_device
+    return torch.device("cuda" if torch.cuda.is_available() else "cpu")

@@ -27,22 +27,22 @@ EXTRA_CONSTRAINT_ROWS = 160
 
 def _import_warp():
     try:
-        import mujoco_warp
         import warp
+
+        warp.config.quiet = True  # before mujoco_warp initialises warp
+        import mujoco_warp
     except ImportError as exc:  # pragma: no cover - depends on the installation
         raise UserError("the warp backend needs mujoco-warp and warp-lang: pip install -e '.[warp]'") from exc
-    warp.config.quiet = True
     warp.init()
     return warp, mujoco_warp
 
 
 def cuda_available() -> bool:
-    """A CUDA device warp can use (the `auto` backend choice)."""
-    try:
-        warp, _ = _import_warp()
-    except UserError:
-        return False
-    return bool(warp.is_cuda_available())
+    """The `auto` choice: mujoco-warp installed and a CUDA device torch can share tensors on (zero-copy views
+    need torch's CUDA too). Decided without importing warp, which costs seconds on CPU-only machines."""
+    import importlib.util
+
+    return importlib.util.find_spec("mujoco_warp") is not None and torch.cuda.is_available()
 
 
 class MujocoWarpBackend(PhysicsBackend):
@@ -60,7 +60,7 @@ class MujocoWarpBackend(PhysicsBackend):
         self.model = model
         self.num_envs = num_envs
         self.decimation = decimation
-        self.device = wp.device_to_torch(self._wp_device)
+        self.device = torch.device(wp.device_to_torch(self._wp_device))
 
         data = mujoco.MjData(model)
         mujoco.mj_forward(model, data)

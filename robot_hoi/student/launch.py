@@ -40,6 +40,8 @@ def resolve_nproc(args: argparse.Namespace) -> int:
 
 
 def rank_device(device: str, rank: int) -> str:
+    if str(device) == "auto":
+        device = "cuda" if torch.cuda.is_available() else "cpu"
     return f"cuda:{rank}" if str(device).startswith("cuda") else "cpu"
 
 

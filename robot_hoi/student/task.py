@@ -32,8 +32,11 @@ def evaluation_cfg(env_cfg: InteractionEnvCfg, num_envs: int, seed: int = 0) -> 
 
 
 def student_env_cfg(env_cfg: InteractionEnvCfg) -> InteractionEnvCfg:
-    """The teachers' env config with the deployable observation group switched on."""
+    """The teachers' env config with the deployable observation group switched on. The student's env runs on
+    the CPU backend unless asked otherwise (its teachers and samplers keep CPU tensors)."""
     cfg = copy.deepcopy(env_cfg)
+    if cfg.backend == "auto":
+        cfg.backend = "cpu"
     cfg.student_obs_terms = tuple(STUDENT_TERMS)
     return cfg
 

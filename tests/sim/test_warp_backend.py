@@ -109,3 +109,16 @@ def test_auto_picks_a_backend_that_exists(scene):
 
     backend = make_backend("auto", scene.model, 2, scene.embodiment.decimation)
     assert type(backend).__name__ == ("MujocoWarpBackend" if cuda_available() else "MujocoCpuBackend")
+
+
+def test_train_cli_runs_a_teacher_on_the_warp_backend(tmp_path):
+    from robot_hoi.cli import main
+
+    out = tmp_path / "run"
+    code = main(["train", "--backend", "warp", "--budget", "2it", "--out", str(out), "--set", "env.num_envs=4",
+                 "--set", "runner.tensorboard=false", "--eval-episodes", "1"])
+    assert code == 0
+    group = next(p for p in out.iterdir() if p.is_dir())
+    assert (group / "model_2.pt").exists() and (group / "eval.json").exists()
+    task = (group / "task.json").read_text()
+    assert '"backend": "warp"' in task

@@ -62,20 +62,22 @@ class InteractionEnv:
             raise UserError(f"env.action_offset must be 'reference' or 'default', not {cfg.action_offset!r}")
         self.cfg = cfg
         self.scene = scene
-        self.device = torch.device("cpu")
         self.num_envs = cfg.num_envs
         self.backend = scene.make_backend(cfg.num_envs, backend=cfg.backend, nthread=cfg.nthread)
+        self.device = self.backend.device  # every env tensor lives where the physics state is
         self.dt = self.backend.control_dt
-        self.generator = torch.Generator().manual_seed(cfg.seed)
+        self.generator = torch.Generator(device=self.device).manual_seed(cfg.seed)
         self.start_sampler = None  # optional: chooses reset clips/states (StartPlan); e.g. the student's samplers
         layout = scene.layout
         self.layout = layout
         self.num_actions = len(layout.actuator_names)
         emb = scene.embodiment
-        self.default_joint_pos = torch.tensor(emb.default_pos, dtype=torch.float32)
-        self.action_scale = torch.tensor(emb.action_scale, dtype=torch.float32)
+        as_tensor = lambda a: torch.tensor(a, dtype=torch.float32, device=self.device)  # noqa: E731
+        self.default_joint_pos = as_tensor(emb.default_pos)
+        self.action_scale = as_tensor(emb.action_scale)
         lo, hi = scene.actuator_ctrlrange()
-        self.ctrl_low, self.ctrl_high = torch.tensor(lo, dtype=torch.float32), torch.tensor(hi, dtype=torch.float32)
+        self.ctrl_low, self.ctrl_high = as_tensor(lo), as_tensor(hi)
+        self._default_robot_qpos = scene.default_robot_qpos().to(self.device)
         hand_joints = {c.joint for hand in emb.hands.values() for c in hand.channels}
         self.body_actuator_ids = [i for i, n in enumerate(layout.actuator_names) if n not in hand_joints]
         contact_index = {n: i for i, n in enumerate(layout.contact_names)}
@@ -89,7 +91,8 @@ class InteractionEnv:
         self.psi = PsiBuffer(cfg.psi, state_dim=layout.robot_nq + layout.robot_nv + 13, generator=self.generator)
         if cfg.psi.enabled:  # the buffer starts with the reference-derived states (RSI), supp. E.2 (i)
             lo, hi = cfg.init.start_range
-            frames = torch.cat([torch.arange(int(s + lo * (e - s)), max(int(s + hi * (e - s)), int(s + lo * (e - s)) + 1))
+            frames = torch.cat([torch.arange(int(s + lo * (e - s)), max(int(s + hi * (e - s)), int(s + lo * (e - s)) + 1),
+                                             device=self.device)
                                 for s, e in zip(self.clip_start.tolist(), self.clip_end.tolist(), strict=True)])
             self.psi.seed_from_reference(self._reference_states(frames), frames)
         self._allocate()
@@ -100,7 +103,7 @@ class InteractionEnv:
     def _setup_references(self, references: list[ReferenceMotion]) -> None:
         if not references:
             raise ValueError("the environment needs at least one reference motion")
-        cat = lambda name: torch.cat([getattr(r, name) for r in references])  # noqa: E731
+        cat = lambda name: torch.cat([getattr(r, name) for r in references]).to(self.device)  # noqa: E731
         self.reference = references[0] if len(references) == 1 else None
         self.references = references
         self.ref_link_pos, self.ref_link_quat = cat("link_pos"), cat("link_quat_wxyz")
@@ -113,17 +116,17 @@ class InteractionEnv:
         self.ref_link_rotmat = quat_to_matrix(self.ref_link_quat)
         self.ref_object_rotmat = quat_to_matrix(self.ref_object_quat)
         self.ref_root_rotmat = quat_to_matrix(self.ref_robot_qpos[:, 3:7])
-        lengths = torch.tensor([r.num_frames for r in references])
+        lengths = torch.tensor([r.num_frames for r in references], device=self.device)
         self.clip_start = torch.cumsum(lengths, 0) - lengths
         self.clip_end = self.clip_start + lengths - 1
-        self.object_points = _subsample(references[0].object_points, self.cfg.object_surface_points)
+        self.object_points = _subsample(references[0].object_points, self.cfg.object_surface_points).to(self.device)
         wrists = [self.layout.link_names.index(n) for n in ("left_wrist_yaw_link", "right_wrist_yaw_link")]
         self.ref_hand_distance = self.ref_d_hat[:, wrists].norm(dim=-1)
         self.total_frames = int(lengths.sum())
 
     def _allocate(self) -> None:
         n, a = self.num_envs, self.num_actions
-        z = lambda *s, dtype=torch.float32: torch.zeros(*s, dtype=dtype)  # noqa: E731
+        z = lambda *s, dtype=torch.float32: torch.zeros(*s, dtype=dtype, device=self.device)  # noqa: E731
         self.actions, self.last_actions = z(n, a), z(n, a)
         self.clip_id = z(n, dtype=torch.long)
         self.ref_index = z(n, dtype=torch.long)
@@ -137,7 +140,7 @@ class InteractionEnv:
 
     # ---- VecEnv -------------------------------------------------------------------------------------------------
     def reset(self) -> dict[str, Tensor]:
-        self._reset_envs(torch.arange(self.num_envs))
+        self._reset_envs(torch.arange(self.num_envs, device=self.device))
         return self._observations()
 
     def step(self, actions: Tensor):
@@ -287,12 +290,12 @@ class InteractionEnv:
         init = self.cfg.init
         plan = self.start_sampler.plan(self, env_ids) if self.start_sampler is not None else None
         clip = plan.clip.clone() if plan is not None else \
-            torch.randint(len(self.references), (n,), generator=self.generator)
-        custom = plan.custom if plan is not None else torch.zeros(n, dtype=torch.bool)
-        stand = (torch.rand(n, generator=self.generator) < init.stand_start_probability) & ~custom
+            torch.randint(len(self.references), (n,), generator=self.generator, device=self.device)
+        custom = plan.custom if plan is not None else torch.zeros(n, dtype=torch.bool, device=self.device)
+        stand = (torch.rand(n, generator=self.generator, device=self.device) < init.stand_start_probability) & ~custom
         frame = self.clip_start[clip].clone()
-        robot_state = torch.zeros(n, self.layout.robot_nq + self.layout.robot_nv)
-        object_state = torch.zeros(n, 13)
+        robot_state = torch.zeros(n, self.layout.robot_nq + self.layout.robot_nv, device=self.device)
+        object_state = torch.zeros(n, 13, device=self.device)
         custom_ids = custom.nonzero().flatten()
         if custom_ids.numel():
             robot_state[custom_ids] = plan.state[custom_ids, : robot_state.shape[1]]
@@ -339,13 +342,14 @@ class InteractionEnv:
     def _random_frames(self, clip: Tensor) -> Tensor:
         lo, hi = self.cfg.init.start_range
         span = (self.clip_end[clip] - self.clip_start[clip]).float()
-        fraction = lo + (hi - lo) * torch.rand(clip.numel(), generator=self.generator)
+        fraction = lo + (hi - lo) * torch.rand(clip.numel(), generator=self.generator, device=self.device)
         return self.clip_start[clip] + (fraction * span).long()
 
     def _reference_states(self, frames: Tensor) -> Tensor:
         """Robot + object states of the IK reference at `frames`, with joint noise (RSI)."""
         qpos = self.ref_robot_qpos[frames].clone()
-        qpos[:, 7:] += self.cfg.init.joint_noise * torch.randn(qpos[:, 7:].shape, generator=self.generator)
+        qpos[:, 7:] += self.cfg.init.joint_noise * torch.randn(qpos[:, 7:].shape, generator=self.generator,
+                                                                device=self.device)
         qvel = self.ref_robot_qvel[frames]
         obj = torch.cat([self.ref_object_pos[frames], self.ref_object_quat[frames],
                          self.ref_object_lin_vel[frames],
@@ -356,13 +360,14 @@ class InteractionEnv:
         """Default standing robot at the reference root's place and heading, object at its reference pose."""
         n = frames.numel()
         lay = self.layout
-        qpos = self.scene.default_robot_qpos().repeat(n, 1)
+        qpos = self._default_robot_qpos.repeat(n, 1)
         ref_root = self.ref_robot_qpos[frames]
-        noise = self.cfg.init.spawn_noise_xy * (2 * torch.rand(n, 2, generator=self.generator) - 1)
+        noise = self.cfg.init.spawn_noise_xy * (2 * torch.rand(n, 2, generator=self.generator, device=self.device) - 1)
         qpos[:, 0:2] = ref_root[:, 0:2] + noise
         qpos[:, 3:7] = quat_mul(yaw_quat(ref_root[:, 3:7]), qpos[:, 3:7])
-        robot = torch.cat([qpos, torch.zeros(n, lay.robot_nv)], dim=1)
-        obj = torch.cat([self.ref_object_pos[frames], self.ref_object_quat[frames], torch.zeros(n, 6)], dim=1)
+        robot = torch.cat([qpos, torch.zeros(n, lay.robot_nv, device=self.device)], dim=1)
+        obj = torch.cat([self.ref_object_pos[frames], self.ref_object_quat[frames],
+                         torch.zeros(n, 6, device=self.device)], dim=1)
         return robot, obj
 
     def current_states(self) -> Tensor:

@@ -72,7 +72,7 @@ class InitCfg:
 class InteractionEnvCfg:
     embodiment: str = "g1_inspire"
     num_envs: int = 64
-    backend: str = "cpu"
+    backend: str = "auto"
     nthread: int | None = None
     seed: int = 0
     keyframes: tuple[int, ...] = (1, 16)    # teacher keyframes K (Sec. 4)

@@ -21,8 +21,9 @@ class PsiBuffer:
         self.gamma = gamma
         self.horizon = horizon
         self.generator = generator
-        self.states = torch.zeros(cfg.buffer_size, state_dim)
-        self.frames = torch.zeros(cfg.buffer_size, dtype=torch.long)
+        self.device = generator.device  # the env's device
+        self.states = torch.zeros(cfg.buffer_size, state_dim, device=self.device)
+        self.frames = torch.zeros(cfg.buffer_size, dtype=torch.long, device=self.device)
         self.size = 0
         self.head = 0
         self.admitted = 0
@@ -33,20 +34,20 @@ class PsiBuffer:
 
     def ready(self) -> bool:
         return self.cfg.enabled and self.size > 0 and bool(
-            torch.rand(1, generator=self.generator).item() < self.cfg.sample_probability)
+            torch.rand(1, generator=self.generator, device=self.device).item() < self.cfg.sample_probability)
 
     def push(self, states: Tensor, frames: Tensor) -> None:
         """FIFO insert: the oldest states are overwritten first."""
         n = states.shape[0]
         if n == 0:
             return
-        idx = (self.head + torch.arange(n)) % self.cfg.buffer_size
+        idx = (self.head + torch.arange(n, device=self.device)) % self.cfg.buffer_size
         self.states[idx], self.frames[idx] = states, frames
         self.head = int((self.head + n) % self.cfg.buffer_size)
         self.size = min(self.size + n, self.cfg.buffer_size)
 
     def sample(self, n: int) -> tuple[Tensor, Tensor]:
-        idx = torch.randint(self.size, (n,), generator=self.generator)
+        idx = torch.randint(self.size, (n,), generator=self.generator, device=self.device)
         return self.states[idx].clone(), self.frames[idx].clone()
 
     def seed_from_reference(self, states: Tensor, frames: Tensor) -> None:
@@ -55,12 +56,12 @@ class PsiBuffer:
     # ---- candidate tracking, called by the env every step ----------------------------------------------------------
     def _ensure(self, env) -> None:
         if self._cand_state is None:
-            n = env.num_envs
-            self._cand_state = torch.zeros(n, self.states.shape[1])
-            self._cand_frame = torch.zeros(n, dtype=torch.long)
-            self._cand_return = torch.zeros(n)
-            self._cand_steps = torch.zeros(n, dtype=torch.long)
-            self._cand_active = torch.zeros(n, dtype=torch.bool)
+            n, device = env.num_envs, self.device
+            self._cand_state = torch.zeros(n, self.states.shape[1], device=device)
+            self._cand_frame = torch.zeros(n, dtype=torch.long, device=device)
+            self._cand_return = torch.zeros(n, device=device)
+            self._cand_steps = torch.zeros(n, dtype=torch.long, device=device)
+            self._cand_active = torch.zeros(n, dtype=torch.bool, device=device)
 
     def observe(self, env, reward: Tensor, done: Tensor) -> None:
         if not self.cfg.enabled:
@@ -77,7 +78,7 @@ class PsiBuffer:
             self.admitted += int(good.sum())
         self._cand_active &= ~(finished | done)
         start = ~self._cand_active & ~done & (env.warmup_left == 0) & (
-            torch.rand(env.num_envs, generator=self.generator) < self.cfg.update_probability)
+            torch.rand(env.num_envs, generator=self.generator, device=self.device) < self.cfg.update_probability)
         if start.any():
             self._cand_state[start] = env.current_states()[start]
             self._cand_frame[start] = env.ref_index[start]

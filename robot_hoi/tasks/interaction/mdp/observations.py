@@ -157,7 +157,7 @@ FINGER_CHANNEL_SENSORS = ("pinky", "ring", "middle", "index", "thumb", "thumb") 
 
 
 def projected_gravity(env) -> Tensor:
-    gravity = torch.tensor([0.0, 0.0, -1.0]).expand(env.num_envs, 3)
+    gravity = torch.tensor([0.0, 0.0, -1.0], device=env.device).expand(env.num_envs, 3)
     return quat_apply_inverse(env.root_quat, gravity)
 
 
