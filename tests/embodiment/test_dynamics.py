@@ -9,7 +9,6 @@ import pytest
 from robot_hoi.embodiment import build_model, load_embodiment
 
 
-
 @pytest.fixture(scope="module")
 def cfg():
     return load_embodiment("g1_inspire")
