@@ -30,6 +30,7 @@ def _import_warp():
         import warp
 
         warp.config.quiet = True  # before mujoco_warp initialises warp
+        warp.config.log_level = warp.LOG_WARNING  # no per-module load lines
         import mujoco_warp
     except ImportError as exc:  # pragma: no cover - depends on the installation
         raise UserError("the warp backend needs mujoco-warp and warp-lang: pip install -e '.[warp]'") from exc

@@ -122,3 +122,15 @@ def test_train_cli_runs_a_teacher_on_the_warp_backend(tmp_path):
     assert (group / "model_2.pt").exists() and (group / "eval.json").exists()
     task = (group / "task.json").read_text()
     assert '"backend": "warp"' in task
+
+
+def test_sim_device_picks_the_warp_device_and_refuses_unknown_ones():
+    from robot_hoi.errors import UserError
+
+    embodiment, clip = load_embodiment("g1_inspire"), default_clip()
+    cfg = load_yaml_dataclass(InteractionEnvCfg, TASK_CONFIG, ["backend=warp", "sim_device=cpu", "num_envs=2"])
+    env = factory.make_env([clip], cfg, embodiment)
+    assert env.device.type == "cpu" and env.reset()["policy"].device.type == "cpu"
+    cfg = load_yaml_dataclass(InteractionEnvCfg, TASK_CONFIG, ["backend=warp", "sim_device=tpu:7", "num_envs=2"])
+    with pytest.raises(UserError, match="tpu:7"):
+        factory.make_env([clip], cfg, embodiment)

@@ -63,7 +63,8 @@ class InteractionEnv:
         self.cfg = cfg
         self.scene = scene
         self.num_envs = cfg.num_envs
-        self.backend = scene.make_backend(cfg.num_envs, backend=cfg.backend, nthread=cfg.nthread)
+        self.backend = scene.make_backend(cfg.num_envs, backend=cfg.backend, nthread=cfg.nthread,
+                                          device=cfg.sim_device)
         self.device = self.backend.device  # every env tensor lives where the physics state is
         self.dt = self.backend.control_dt
         self.generator = torch.Generator(device=self.device).manual_seed(cfg.seed)

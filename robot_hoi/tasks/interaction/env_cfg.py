@@ -73,6 +73,7 @@ class InteractionEnvCfg:
     embodiment: str = "g1_inspire"
     num_envs: int = 64
     backend: str = "auto"
+    sim_device: str | None = None           # warp backend device ("cuda:1", "cpu"); None = cuda:0 if present, else cpu
     nthread: int | None = None
     seed: int = 0
     keyframes: tuple[int, ...] = (1, 16)    # teacher keyframes K (Sec. 4)

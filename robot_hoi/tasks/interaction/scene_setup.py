@@ -63,8 +63,10 @@ class InteractionScene:
             contact=slice(int(contact_adr), int(contact_adr) + 4 * len(contact_names)),
         )
 
-    def make_backend(self, num_envs: int, backend: str = "cpu", nthread: int | None = None):
-        return make_backend(backend, self.model, num_envs, self.embodiment.decimation, nthread=nthread)
+    def make_backend(self, num_envs: int, backend: str = "cpu", nthread: int | None = None,
+                     device: str | None = None):
+        return make_backend(backend, self.model, num_envs, self.embodiment.decimation, nthread=nthread,
+                            device=device)
 
     def actuator_ctrlrange(self) -> tuple[np.ndarray, np.ndarray]:
         ids = [mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_ACTUATOR, n) for n in self.layout.actuator_names]
