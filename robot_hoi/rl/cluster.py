@@ -15,8 +15,11 @@ into RUN/<group>/. A worker that does not (another machine with its own disks) t
 retarget cache any node rebuilds in seconds) and deletes it; the driver unpacks the archive into RUN/<group>/ file
 by file with atomic renames, so the group folder then mirrors the worker's (its references/ kept). --storage
 shared|local skips the detection: shared fails loudly on a worker that cannot see the run folder, local always
-ships archives. Without shared storage a retry resumes only if Ray re-runs it on the same node (the staging folder
-survives there); with --resume the driver first sends its copy of the group folder to the worker.
+ships archives. Without shared storage the worker also mirrors its folder to the driver after every periodic
+checkpoint (only the files that changed, through a small actor pinned to the driver's node), so a retry on any
+node resumes from the last checkpoint: it keeps its staging folder if Ray re-runs it on the same node, else it
+starts from the driver's mirror. With --resume the driver first sends its copy of the group folder to the worker.
+(Under Ray Client the driver runs off the cluster: no mirror, and a retry elsewhere restarts that teacher.)
 
 Cluster nodes need robot-hoi installed at the same commit (`pip install -e .[cluster]`); clips travel with the
 task, so clip files need to exist only on the driver.
@@ -63,7 +66,8 @@ class RayOptions:
 
 
 # --- worker side ------------------------------------------------------------------------------------------------
-def teacher_task(job: TeacherJob, clips: list, storage: str, seed_archive: bytes | None = None) -> dict[str, Any]:
+def teacher_task(job: TeacherJob, clips: list, storage: str, seed_archive: bytes | None = None,
+                 mirror=None) -> dict[str, Any]:
     """Body of one Ray task: train the group where the driver can get at it (see the module docstring)."""
     import ray
 
@@ -78,9 +82,16 @@ def teacher_task(job: TeacherJob, clips: list, storage: str, seed_archive: bytes
         if shared and storage != "local":
             return {**train_teacher_group(job, clips), "storage": "shared"}
         staging = staging_dir(job)
-        _prepare_staging(staging, job.run_token, seed_archive)
-        summary = train_teacher_group(job.at(staging), clips)
-        summary.update(storage="local", archive=pack_folder(staging))
+        _prepare_staging(staging, job.run_token, seed_archive, mirror, job.group)
+        if mirror is None:
+            summary = train_teacher_group(job.at(staging), clips)
+            summary.update(storage="local", archive=pack_folder(staging))
+        else:
+            sync = FolderSync(staging, lambda archive, present: ray.get(mirror.put.remote(job.group, archive,
+                                                                                           present)))
+            summary = train_teacher_group(job.at(staging), clips, on_checkpoint=sync)
+            sync()  # the final checkpoint and eval.json
+            summary.update(storage="local")
         shutil.rmtree(staging, ignore_errors=True)
         _remove_if_empty(staging.parent)  # the invocation's folder, once its last group has gone
         return summary
@@ -108,35 +119,90 @@ def _remove_if_empty(folder: Path) -> None:
         pass  # not empty (another group of this run) or already gone
 
 
-def _prepare_staging(staging: Path, token: str, seed_archive: bytes | None) -> None:
+def _prepare_staging(staging: Path, token: str, seed_archive: bytes | None, mirror=None, group: str = "") -> None:
     """Keep a staging folder this invocation already trained in (a retry on the same node); else start it from
-    the driver's copy (--resume) or empty."""
+    the driver's mirror of this invocation's checkpoints (a retry on another node), else from the driver's copy
+    (--resume), else empty."""
+    import ray
+
     state = read_job_state(staging)
     if state is not None and state["run_token"] == token:
         return
     shutil.rmtree(staging, ignore_errors=True)
     staging.mkdir(parents=True)
-    if seed_archive is not None:
-        unpack_into(seed_archive, staging)
+    mirrored = ray.get(mirror.get.remote(group)) if mirror is not None else None
+    for archive in (mirrored, seed_archive):
+        if archive is not None:
+            unpack_into(archive, staging)
+            return
+
+
+class FolderSync:
+    """Worker side of the mirror: pushes the files of `folder` that changed since the last push (by size and
+    mtime), with the list of all files present so that the driver drops what the worker pruned."""
+
+    def __init__(self, folder: Path, push) -> None:
+        self.folder = Path(folder)
+        self.push = push  # push(archive: bytes, present: list[str])
+        self.sent: dict[str, tuple[int, int]] = {}
+
+    def __call__(self, _checkpoint: Path | None = None) -> None:
+        files = {}
+        for rel in shipped_files(self.folder):
+            stat = (self.folder / rel).stat()
+            files[rel] = (stat.st_size, stat.st_mtime_ns)
+        changed = [rel for rel, signature in files.items() if self.sent.get(rel) != signature]
+        self.push(pack_folder(self.folder, only=changed), sorted(files))
+        self.sent = files
+
+
+class CheckpointMirror:
+    """Driver-node side of the mirror (a Ray actor pinned to the driver's node): serialises the workers' pushes
+    into RUN/<group>/ and hands this invocation's copy to a retry."""
+
+    def __init__(self, out_dir: str, token: str) -> None:
+        self.out_dir = Path(out_dir)
+        self.token = token
+
+    def put(self, group: str, archive: bytes, present: list[str]) -> None:
+        unpack_into(archive, self.out_dir / group, present=set(present))
+
+    def get(self, group: str) -> bytes | None:
+        folder = self.out_dir / group
+        state = read_job_state(folder)
+        if state is None or state["run_token"] != self.token or latest_checkpoint(folder) is None:
+            return None
+        return pack_folder(folder)
 
 
 # --- moving group folders ---------------------------------------------------------------------------------------
-def pack_folder(folder: Path, skip: tuple[str, ...] = NOT_SHIPPED) -> bytes:
-    """The folder's files as an uncompressed tar (checkpoints are float tensors: gzip buys little), leaving out
-    the top-level entries in `skip` and hidden files (atomic writes' temporaries)."""
+def shipped_files(folder: Path, skip: tuple[str, ...] = NOT_SHIPPED) -> list[str]:
+    """Relative paths of the folder's files that travel: not the top-level entries in `skip`, not hidden files
+    (atomic writes' temporaries)."""
+    files = []
+    for path in sorted(Path(folder).rglob("*")):
+        rel = path.relative_to(folder)
+        if rel.parts[0] in skip or any(part.startswith(".") for part in rel.parts) or not path.is_file():
+            continue
+        files.append(rel.as_posix())
+    return files
+
+
+def pack_folder(folder: Path, skip: tuple[str, ...] = NOT_SHIPPED, only: list[str] | None = None) -> bytes:
+    """The folder's shipped files (or just `only` of them) as an uncompressed tar (checkpoints are float
+    tensors: gzip buys little)."""
     buffer = io.BytesIO()
     with tarfile.open(fileobj=buffer, mode="w") as tar:
-        for path in sorted(Path(folder).rglob("*")):
-            rel = path.relative_to(folder)
-            if rel.parts[0] in skip or any(part.startswith(".") for part in rel.parts) or not path.is_file():
-                continue
-            tar.add(path, arcname=rel.as_posix(), recursive=False)
+        for rel in shipped_files(folder, skip) if only is None else only:
+            tar.add(Path(folder) / rel, arcname=rel, recursive=False)
     return buffer.getvalue()
 
 
-def unpack_into(archive: bytes, target: Path, keep: tuple[str, ...] = NOT_SHIPPED) -> None:
+def unpack_into(archive: bytes, target: Path, keep: tuple[str, ...] = NOT_SHIPPED,
+                present: set[str] | None = None) -> None:
     """Make `target` mirror the archive: every file lands by an atomic rename, then files the archive lacks go
-    (except the top-level entries in `keep`). A crash part-way leaves whole files only."""
+    (except the top-level entries in `keep`, and the files listed in `present`: an incremental archive ships
+    only what changed). A crash part-way leaves whole files only."""
     target = Path(target)
     incoming_root = target.parent / INCOMING_DIRNAME
     incoming_root.mkdir(parents=True, exist_ok=True)
@@ -150,7 +216,7 @@ def unpack_into(archive: bytes, target: Path, keep: tuple[str, ...] = NOT_SHIPPE
             os.replace(incoming / rel, target / rel)
         for path in sorted(target.rglob("*"), reverse=True):
             rel = path.relative_to(target)
-            if rel.parts[0] in keep or rel in arrived:
+            if rel.parts[0] in keep or rel in arrived or (present is not None and rel.as_posix() in present):
                 continue
             if path.is_file() or path.is_symlink():
                 path.unlink()
@@ -186,6 +252,7 @@ def run_teachers(jobs: list[TeacherJob], clips: list[list], options: RayOptions,
         except (ConnectionError, ValueError, RuntimeError) as exc:
             raise UserError(f"Ray at {options.address or 'a new local instance'}: {exc}") from None
     pending: dict = {}
+    mirror = None
     try:
         resources = ray.cluster_resources()
         gpus = options.gpus_per_teacher
@@ -198,6 +265,7 @@ def run_teachers(jobs: list[TeacherJob], clips: list[list], options: RayOptions,
         out_dir.mkdir(parents=True, exist_ok=True)
         atomic_write_text(out_dir / TOKEN_FILE, jobs[0].run_token + "\n")
         task = ray.remote(teacher_task)
+        mirror = _start_mirror(out_dir, jobs[0].run_token) if options.storage != "shared" else None
         for job, group_clips in zip(jobs, clips, strict=True):
             job = _for_worker(job, options)
             seed = None
@@ -205,7 +273,7 @@ def run_teachers(jobs: list[TeacherJob], clips: list[list], options: RayOptions,
                 seed = pack_folder(Path(job.run_dir))
             ref = task.options(num_cpus=options.cpus_per_teacher, num_gpus=gpus, max_retries=options.max_retries,
                                retry_exceptions=True, name=f"teacher:{job.group}").remote(
-                job, group_clips, options.storage, seed)
+                job, group_clips, options.storage, seed, mirror)
             pending[ref] = job
         log(f"ray: {len(jobs)} teacher task(s), {options.cpus_per_teacher:g} CPU + {gpus:g} GPU each, on a "
             f"cluster of {resources.get('CPU', 0):g} CPUs / {resources.get('GPU', 0):g} GPUs")
@@ -213,9 +281,23 @@ def run_teachers(jobs: list[TeacherJob], clips: list[list], options: RayOptions,
     finally:
         for ref in pending:  # interrupted: do not leave teachers running on a shared cluster
             ray.cancel(ref, force=True)
+        if mirror is not None:
+            ray.kill(mirror)
         (out_dir / TOKEN_FILE).unlink(missing_ok=True)
         if started_here:
             ray.shutdown()
+
+
+def _start_mirror(out_dir: Path, token: str):
+    """The CheckpointMirror actor on this (the driver's) node; None under Ray Client (the driver is off-cluster)."""
+    import ray
+    from ray.util.scheduling_strategies import NodeAffinitySchedulingStrategy
+
+    if ray.util.client.ray.is_connected():
+        return None
+    here = NodeAffinitySchedulingStrategy(node_id=ray.get_runtime_context().get_node_id(), soft=False)
+    return ray.remote(CheckpointMirror).options(num_cpus=0, scheduling_strategy=here).remote(
+        str(out_dir.resolve()), token)
 
 
 def _for_worker(job: TeacherJob, options: RayOptions) -> TeacherJob:

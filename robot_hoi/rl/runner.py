@@ -13,6 +13,7 @@ from __future__ import annotations
 import json
 import time
 from collections import deque
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -72,6 +73,7 @@ class OnPolicyRunner:
         self.cfg = cfg
         self.device = torch.device(device)
         self.log_dir = Path(log_dir) if log_dir is not None else None
+        self.on_checkpoint: Callable[[Path], None] | None = None  # after each periodic save (Ray mirroring)
         torch.manual_seed(cfg.seed)
         rc = cfg.runner
         self.actor_dim = group_dim(env, rc.actor_obs_groups, "actor")
@@ -285,8 +287,10 @@ class OnPolicyRunner:
     def _save_periodic(self) -> None:
         if self.log_dir is None:
             return
-        self.save(self.log_dir / f"model_{self.iteration}.pt")
+        path = self.save(self.log_dir / f"model_{self.iteration}.pt")
         prune_checkpoints(self.log_dir, self.cfg.runner.keep_last)
+        if self.on_checkpoint is not None:
+            self.on_checkpoint(path)
 
     def save(self, path: str | Path) -> Path:
         git = self._git()

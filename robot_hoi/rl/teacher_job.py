@@ -18,8 +18,10 @@ import copy
 import json
 import math
 import os
+import shutil
 import socket
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -31,7 +33,8 @@ JOB_STATE_FILE = "job_state.json"
 EVAL_FILE = "eval.json"
 SCALARS_FILE = "scalars.jsonl"
 # Test-only hook: a folder; the first periodic checkpoint of each group then kills the process once (as a
-# pre-empted node would), leaving <folder>/<group>.preempted so that the retry trains on.
+# pre-empted node would), leaving <folder>/<group>.preempted so that the retry trains on. A file <folder>/lose_disk
+# makes the dying process delete its group folder first (the node and its disk are gone: the retry runs elsewhere).
 PREEMPT_HOOK_ENV = "ROBOT_HOI_TEST_PREEMPT_AFTER_CHECKPOINT"
 PREEMPT_EXIT_CODE = 75
 
@@ -93,11 +96,13 @@ def remaining_budget(budget: Budget, state: dict, iteration: int, samples: int, 
     return Budget(**left)
 
 
-def train_teacher_group(job: TeacherJob, clips: list | None = None, log=print) -> dict[str, Any]:
+def train_teacher_group(job: TeacherJob, clips: list | None = None, log=print,
+                        on_checkpoint: Callable[[Path], None] | None = None) -> dict[str, Any]:
     """Train (or finish training) one group in job.run_dir, evaluate it, write eval.json; return a summary.
 
     `clips` are the loaded clips of job.sources (loaded here when None; a Ray task receives them from the
-    driver, so clip files need not exist on the worker)."""
+    driver, so clip files need not exist on the worker). `on_checkpoint(path)` runs after each periodic
+    checkpoint (a Ray worker without shared storage mirrors the folder to the driver there)."""
     import torch
 
     from robot_hoi.embodiment import load_embodiment
@@ -128,6 +133,7 @@ def train_teacher_group(job: TeacherJob, clips: list | None = None, log=print) -
     torch.manual_seed(job.train_cfg.seed)
     env = factory.make_env(clips, job.env_cfg, embodiment, cache=run_dir / "references")
     runner = OnPolicyRunner(env, job.train_cfg, run_dir, device=policy_device(job.device, env.device))
+    runner.on_checkpoint = on_checkpoint
     resumed_from = None
     if resume_from is not None:
         runner.resume(resume_from)
@@ -216,6 +222,8 @@ def _arm_preemption(runner, marker: Path) -> None:
         save()
         marker.parent.mkdir(parents=True, exist_ok=True)
         marker.write_text(f"pre-empted after iteration {runner.iteration}\n")
+        if (marker.parent / "lose_disk").exists():
+            shutil.rmtree(runner.log_dir, ignore_errors=True)
         os._exit(PREEMPT_EXIT_CODE)
 
     runner._save_periodic = save_then_die

@@ -11,7 +11,14 @@ from pathlib import Path
 import pytest
 
 from robot_hoi.cli import main
-from robot_hoi.rl.cluster import INCOMING_DIRNAME, STAGING_DIRNAME, TOKEN_FILE, pack_folder, unpack_into
+from robot_hoi.rl.cluster import (
+    INCOMING_DIRNAME,
+    STAGING_DIRNAME,
+    TOKEN_FILE,
+    FolderSync,
+    pack_folder,
+    unpack_into,
+)
 from robot_hoi.rl.teacher_job import PREEMPT_HOOK_ENV
 
 ray = pytest.importorskip("ray")
@@ -88,6 +95,54 @@ def test_workers_without_shared_storage_ship_results_back(local_ray, tmp_path, m
     assert summary["resumed_from"] == 2 and summary["iteration"] == 4
     assert (folder / "model_4.pt").is_file() and _steps(folder) == [1, 2, 3, 4]
     assert json.loads((folder / "eval.json").read_text())["checkpoint"] == "model_4.pt"
+
+
+def test_a_retry_that_lost_its_disk_resumes_from_the_drivers_mirror(local_ray, tmp_path, monkeypatch):
+    markers = tmp_path / "markers"
+    markers.mkdir()
+    (markers / "lose_disk").write_text("the pre-empted node's staging folder goes with it\n")
+    monkeypatch.setenv(PREEMPT_HOOK_ENV, str(markers))
+    out = tmp_path / "driver"
+
+    assert _train(out, "--budget", "3it", "--storage", "local", "--max-retries", "1",
+                  data=("embedded:push",)) == 0
+
+    assert "iteration 2" in (markers / f"{PUSH}.preempted").read_text()
+    summary = json.loads((out / "teachers.json").read_text())["teachers"][PUSH]
+    assert summary["storage"] == "local" and summary["resumed_from"] == 2 and summary["iterations"] == 1
+    folder = out / PUSH
+    assert (folder / "model_3.pt").is_file() and _steps(folder) == [1, 2, 3]
+    assert json.loads((folder / "eval.json").read_text())["checkpoint"] == "model_3.pt"
+    assert not Path(summary["run_dir"]).parent.exists() and not (out / INCOMING_DIRNAME).exists()
+
+
+def test_folder_sync_pushes_only_changes_and_the_driver_drops_pruned_files(tmp_path):
+    worker, driver = tmp_path / "worker", tmp_path / "run" / "group"
+    worker.mkdir()
+    pushed: list[list[str]] = []
+
+    def push(archive: bytes, present: list[str]) -> None:
+        import io
+        import tarfile
+
+        with tarfile.open(fileobj=io.BytesIO(archive)) as tar:
+            pushed.append(sorted(tar.getnames()))
+        unpack_into(archive, driver, present=set(present))
+
+    sync = FolderSync(worker, push)
+    (worker / "model_2.pt").write_bytes(b"two")
+    (worker / "scalars.jsonl").write_text("a\n")
+    sync()
+    (worker / "model_4.pt").write_bytes(b"four")
+    with open(worker / "scalars.jsonl", "a") as f:
+        f.write("bb\n")  # grows: its size changes even where mtime has a coarse clock
+    sync()
+    (worker / "model_2.pt").unlink()  # pruned (keep_last)
+    sync()
+
+    assert pushed == [["model_2.pt", "scalars.jsonl"], ["model_4.pt", "scalars.jsonl"], []]
+    assert sorted(p.name for p in driver.iterdir()) == ["model_4.pt", "scalars.jsonl"]
+    assert (driver / "scalars.jsonl").read_text() == "a\nbb\n"
 
 
 def test_teacher_larger_than_the_cluster_is_a_user_error(local_ray, tmp_path, capsys):
