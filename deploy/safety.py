@@ -127,7 +127,11 @@ def action_fault(action: np.ndarray, contract: PolicyContract, config: SafetyCon
 
 
 class TargetShaper:
-    """Clamp to joint limits, then limit the per-tick change; counts what it had to change."""
+    """Clamp to joint limits, then limit the per-tick change; counts what it had to change by more than
+    `report_tolerance` radians (a policy holding a joint at its stop overshoots by micro-radians every tick:
+    not worth an event)."""
+
+    report_tolerance = 1e-3
 
     def __init__(self, contract: PolicyContract, dt: float, max_rate: float):
         self.lower = contract.joint_lower
@@ -145,12 +149,12 @@ class TargetShaper:
 
     def __call__(self, target: np.ndarray) -> np.ndarray:
         clamped = np.clip(target, self.lower, self.upper)
-        self.last_clamped = clamped != target
+        self.last_clamped = np.abs(clamped - target) > self.report_tolerance
         shaped = clamped
         if self.previous is not None:
             shaped = np.clip(clamped, self.previous - self.max_step, self.previous + self.max_step)
             shaped = np.clip(shaped, self.lower, self.upper)
-        self.last_rate_limited = shaped != clamped
+        self.last_rate_limited = np.abs(shaped - clamped) > self.report_tolerance
         self.clamped_ticks += bool(self.last_clamped.any())
         self.rate_limited_ticks += bool(self.last_rate_limited.any())
         self.previous = shaped

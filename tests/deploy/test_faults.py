@@ -238,3 +238,24 @@ def test_body_send_failure_damps_at_the_next_tick(dev_policy):
     assert_damped(rig, command)
     assert rig.runtime.fault_reasons == ["body send failed: DDS write failed"]
     assert rig.runtime.body_send_errors == 1
+
+
+def test_shaper_reports_only_changes_beyond_a_milliradian(dev_policy):
+    from deploy.safety import TargetShaper
+
+    contract = RuntimeRig(dev_policy).contract
+    shaper = TargetShaper(contract, dt=0.02, max_rate=10.0)  # 0.2 rad per tick
+    lower, upper = contract.joint_lower, contract.joint_upper
+    target = (lower + upper) / 2
+    target[3] = upper[3]
+    shaper.reset(target)
+    target[3] = upper[3] + 2e-6  # a policy holding the knee at its stop, micro-radians past it
+    np.testing.assert_array_equal(shaper(target)[3], upper[3])
+    assert shaper.clamped_ticks == 0 and not shaper.last_clamped.any()
+    target[3] = upper[3] + 0.05
+    shaper(target)
+    assert shaper.clamped_ticks == 1 and np.flatnonzero(shaper.last_clamped).tolist() == [3]
+    target[5] = target[5] + 0.5  # beyond one tick's 0.2 rad
+    shaped = shaper(target)
+    assert shaper.rate_limited_ticks == 1 and np.flatnonzero(shaper.last_rate_limited).tolist() == [5]
+    assert abs(shaped[5] - (target[5] - 0.3)) < 1e-12
