@@ -88,6 +88,9 @@ class Session(contextlib.ExitStack):
         o = self.options
         if o.hand_bus not in HAND_TRANSPORTS:
             raise DeployError(f"--hand-bus must be one of {', '.join(HAND_TRANSPORTS)}, got {o.hand_bus!r}")
+        if o.auto_start and not o.dry_run:
+            raise DeployError("--auto-start is only allowed with --dry-run; on the robot the operator starts")
+        self._check_hand_options()
         policy = OnnxPolicy(o.policy)
         contract = policy.contract
         check_against_embodiment(contract, resolve_embodiment_path(o.embodiment))
@@ -107,8 +110,6 @@ class Session(contextlib.ExitStack):
         self.callback(events.close)
         recorder = TickRecorder(log_dir)
         self.callback(recorder.close)
-        if o.auto_start and not o.dry_run:
-            raise DeployError("--auto-start is only allowed with --dry-run; on the robot the operator starts")
         safety = o.safety
         if o.auto_start and safety.auto_start_after_s is None:
             safety.auto_start_after_s = 0.5
@@ -196,9 +197,8 @@ class Session(contextlib.ExitStack):
         self.callback(tracker.close)
         return tracker
 
-    def _hands(self, contract) -> Hands:
-        from deploy.hands import make_hand_bus
-
+    def _check_hand_options(self) -> tuple[bool, list[int]]:
+        """(real ports?, hand ids): checked before anything opens, so a wrong command line touches no hardware."""
         o = self.options
         transport = o.hand_bus
         real_ports = bool(o.hand_ports) or bool(o.can_channel)
@@ -213,6 +213,14 @@ class Session(contextlib.ExitStack):
         hand_ids = o.hand_ids or ([1, 2] if transport == "can" else [1, 1])
         if len(hand_ids) != 2:
             raise DeployError(f"--hand-id takes two ids (left, right), got {hand_ids}")
+        return real_ports, hand_ids
+
+    def _hands(self, contract) -> Hands:
+        from deploy.hands import make_hand_bus
+
+        o = self.options
+        transport = o.hand_bus
+        real_ports, hand_ids = self._check_hand_options()
         common = {"retries": o.hand_retries, "safe_pose": o.hand_safe_state}
         if o.hand_timeout is not None:
             common["timeout"] = o.hand_timeout
