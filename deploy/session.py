@@ -90,7 +90,7 @@ class Session(contextlib.ExitStack):
             raise DeployError(f"--hand-bus must be one of {', '.join(HAND_TRANSPORTS)}, got {o.hand_bus!r}")
         if o.auto_start and not o.dry_run:
             raise DeployError("--auto-start is only allowed with --dry-run; on the robot the operator starts")
-        self._check_hand_options()
+        real_hand_ports, hand_ids = self._check_hand_options()
         policy = OnnxPolicy(o.policy)
         contract = policy.contract
         check_against_embodiment(contract, resolve_embodiment_path(o.embodiment))
@@ -104,7 +104,7 @@ class Session(contextlib.ExitStack):
         tracker = self._tracker(motion)
         if o.dry_run and hasattr(body, "imu_quat_source") and hasattr(tracker, "true_robot_quat_wxyz"):
             body.imu_quat_source = tracker.true_robot_quat_wxyz  # one simulated world: IMU agrees with mocap
-        hands = self._hands(contract)
+        hands = self._hands(contract, real_hand_ports, hand_ids)
 
         events = EventLog(self.clock, log_dir / "events.jsonl")
         self.callback(events.close)
@@ -215,12 +215,11 @@ class Session(contextlib.ExitStack):
             raise DeployError(f"--hand-id takes two ids (left, right), got {hand_ids}")
         return real_ports, hand_ids
 
-    def _hands(self, contract) -> Hands:
+    def _hands(self, contract, real_ports: bool, hand_ids: list[int]) -> Hands:
         from deploy.hands import make_hand_bus
 
         o = self.options
         transport = o.hand_bus
-        real_ports, hand_ids = self._check_hand_options()
         common = {"retries": o.hand_retries, "safe_pose": o.hand_safe_state}
         if o.hand_timeout is not None:
             common["timeout"] = o.hand_timeout
