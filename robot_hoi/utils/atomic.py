@@ -1,47 +1,6 @@
-"""Atomic file writes: write to a temporary file in the same folder, then rename over the target.
+"""Atomic file writes: the project's single implementation lives in deploy._atomic (deploy must not import
+robot_hoi, so robot_hoi imports it from there)."""
 
-A crash never leaves a half-written file where a user expects a good one.
-"""
+from deploy._atomic import atomic_path, atomic_write_bytes, atomic_write_text
 
-from __future__ import annotations
-
-import contextlib
-import os
-import tempfile
-from collections.abc import Iterator
-from pathlib import Path
-
-
-@contextlib.contextmanager
-def atomic_path(path: str | os.PathLike, suffix: str | None = None) -> Iterator[Path]:
-    """Yield a temporary path next to `path`; on success it replaces `path`, on error it is removed.
-
-    `suffix` defaults to the target's own suffix, so writers that pick a format by extension still work.
-    """
-    target = Path(path)
-    target.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.", suffix=suffix or target.suffix)
-    os.close(fd)
-    os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; outputs get the usual permissions
-    tmp_path = Path(tmp)
-    try:
-        yield tmp_path
-        os.replace(tmp_path, target)
-    except BaseException:
-        tmp_path.unlink(missing_ok=True)
-        raise
-
-
-def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
-
-
-def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> None:
-    with atomic_path(path) as tmp:
-        tmp.write_bytes(data)
-
-
-def atomic_write_text(path: str | os.PathLike, text: str) -> None:
-    atomic_write_bytes(path, text.encode())
+__all__ = ["atomic_path", "atomic_write_bytes", "atomic_write_text"]
