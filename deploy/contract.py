@@ -51,6 +51,7 @@ from pathlib import Path
 
 import numpy as np
 
+from deploy.embodiment import check_against_embodiment  # noqa: F401  (re-exported: callers import it from here)
 from deploy.errors import ContractError
 from deploy.hand_units import HAND_SIDES, INSPIRE_CHANNELS, HandChannel
 
@@ -269,6 +270,8 @@ def _check_signature(session, source: str) -> tuple[int, int]:
     by_name = {o.name: o for o in outputs}
     if OUTPUT_NAME not in by_name:
         raise ContractError(f"{source}: no output named '{OUTPUT_NAME}' (outputs: {list(by_name)})")
+    if len(outputs) != 1:  # extra heads (value, std, ...) mean the wrong graph was exported
+        raise ContractError(f"{source}: expected exactly one output '{OUTPUT_NAME}', got {list(by_name)}")
     dims = []
     for arg, kind in ((inputs[0], "input"), (by_name[OUTPUT_NAME], "output")):
         if arg.type != "tensor(float)":
@@ -478,33 +481,3 @@ def _parse_obs_spec(value, dims: _Dims, fail) -> tuple[ObsTermSpec, ...]:
     if len(set(names)) != len(names):
         raise fail("obs_spec", "lists a term twice")
     return tuple(spec)
-
-
-def check_against_embodiment(contract: PolicyContract, embodiment_yaml_path: str | os.PathLike) -> None:
-    """Refuse a policy trained for another robot layout: actuator names/order, control_dt, hand mapping."""
-    from deploy.embodiment import load_embodiment
-
-    emb = load_embodiment(embodiment_yaml_path)
-    problems = []
-    if contract.embodiment != emb.name:
-        problems.append(f"embodiment is '{contract.embodiment}' but the config is '{emb.name}'")
-    if list(contract.actuator_names) != emb.actuator_names:
-        if len(contract.actuator_names) != len(emb.actuator_names):
-            problems.append(f"{len(contract.actuator_names)} actuators vs {len(emb.actuator_names)} in the config")
-        else:
-            i = next(i for i, (a, b) in enumerate(zip(contract.actuator_names, emb.actuator_names, strict=True)) if a != b)
-            problems.append(f"actuator {i} is '{contract.actuator_names[i]}' but the config has '{emb.actuator_names[i]}'")
-    if not math.isclose(contract.control_dt, emb.control_dt, rel_tol=1e-6, abs_tol=1e-9):
-        problems.append(f"control_dt {contract.control_dt} s vs {emb.control_dt} s in the config")
-    for side in HAND_SIDES:
-        for ours, theirs in zip(contract.hands[side], emb.hands[side], strict=True):
-            if ours.name != theirs.name or ours.joint != theirs.joint:
-                problems.append(f"hand {side} channel '{ours.name}'/{ours.joint} vs '{theirs.name}'/{theirs.joint}")
-            elif not (math.isclose(ours.open_rad, theirs.open_rad, abs_tol=1e-9)
-                      and math.isclose(ours.closed_rad, theirs.closed_rad, abs_tol=1e-9)):
-                problems.append(
-                    f"hand {side} '{ours.name}' maps open/closed {ours.open_rad}/{ours.closed_rad} rad vs "
-                    f"{theirs.open_rad}/{theirs.closed_rad} in the config"
-                )
-    if problems:
-        raise ContractError(f"{contract.source} does not match {emb.path}: " + "; ".join(problems))

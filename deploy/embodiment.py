@@ -11,11 +11,21 @@ import math
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import yaml
 
-from deploy.errors import DeployError
+from deploy.errors import ContractError, DeployError
 from deploy.hand_units import HAND_SIDES, INSPIRE_CHANNELS, HandChannel
+
+if TYPE_CHECKING:
+    from deploy.contract import PolicyContract
+
+# The `mode_machine` each embodiment's robot reports in LowState (Unitree's G1 description table: 4 = 23-DoF,
+# 5 = 29-DoF rev 1.0 with or without Inspire hands, 6 = 29-DoF waist locked). Kept here, not in the YAML, because
+# training reads the same YAML and refuses keys it does not know.
+MODE_MACHINE = {"g1_inspire": 5}
+MODE_MACHINE_NAMES = {4: "G1 23-DoF rev 1.0", 5: "G1 29-DoF rev 1.0", 6: "G1 29-DoF waist locked rev 1.0"}
 
 # Next to the repository's configs when run from a checkout; DEPLOY_CONFIG_DIR overrides (robot without a checkout).
 _REPO_CONFIGS = Path(__file__).resolve().parents[1] / "configs" / "embodiments"
@@ -42,6 +52,11 @@ class EmbodimentConfig:
     @property
     def actuator_names(self) -> list[str]:
         return [a.name for a in self.actuators]
+
+    @property
+    def mode_machine(self) -> int | None:
+        """The mode_machine the robot must report (None: this embodiment has no known value; not checked)."""
+        return MODE_MACHINE.get(self.name)
 
 
 def embodiment_search_dirs() -> list[Path]:
@@ -140,3 +155,55 @@ def load_embodiment(name_or_path: str | os.PathLike) -> EmbodimentConfig:
         hands=hands,
         link_map={str(k): str(v) for k, v in link_map.items()},
     )
+
+
+# How far the policy's gains and default pose may sit from the embodiment YAML (JSON and float32 round trips
+# stay far inside these; a retuned gain or a shifted default pose does not).
+GAIN_RTOL = 1e-3
+GAIN_ATOL = 1e-6
+DEFAULT_POSE_ATOL_RAD = 1e-3
+
+
+def check_against_embodiment(contract: PolicyContract, embodiment_yaml_path: str | os.PathLike) -> None:
+    """Refuse a policy trained for another robot layout: actuator names/order, control_dt, hand mapping, and
+    (when the order matches) each actuator's kp, kd and default pose within GAIN_RTOL/GAIN_ATOL and
+    DEFAULT_POSE_ATOL_RAD."""
+    emb = load_embodiment(embodiment_yaml_path)
+    problems = []
+    if contract.embodiment != emb.name:
+        problems.append(f"embodiment is '{contract.embodiment}' but the config is '{emb.name}'")
+    if list(contract.actuator_names) != emb.actuator_names:
+        if len(contract.actuator_names) != len(emb.actuator_names):
+            problems.append(f"{len(contract.actuator_names)} actuators vs {len(emb.actuator_names)} in the config")
+        else:
+            i = next(i for i, (a, b) in enumerate(zip(contract.actuator_names, emb.actuator_names, strict=True)) if a != b)
+            problems.append(f"actuator {i} is '{contract.actuator_names[i]}' but the config has '{emb.actuator_names[i]}'")
+    else:
+        problems.extend(_actuator_mismatches(contract, emb))
+    if not math.isclose(contract.control_dt, emb.control_dt, rel_tol=1e-6, abs_tol=1e-9):
+        problems.append(f"control_dt {contract.control_dt} s vs {emb.control_dt} s in the config")
+    for side in HAND_SIDES:
+        for ours, theirs in zip(contract.hands[side], emb.hands[side], strict=True):
+            if ours.name != theirs.name or ours.joint != theirs.joint:
+                problems.append(f"hand {side} channel '{ours.name}'/{ours.joint} vs '{theirs.name}'/{theirs.joint}")
+            elif not (math.isclose(ours.open_rad, theirs.open_rad, abs_tol=1e-9)
+                      and math.isclose(ours.closed_rad, theirs.closed_rad, abs_tol=1e-9)):
+                problems.append(
+                    f"hand {side} '{ours.name}' maps open/closed {ours.open_rad}/{ours.closed_rad} rad vs "
+                    f"{theirs.open_rad}/{theirs.closed_rad} in the config"
+                )
+    if problems:
+        raise ContractError(f"{contract.source} does not match {emb.path}: " + "; ".join(problems))
+
+
+def _actuator_mismatches(contract: PolicyContract, emb: EmbodimentConfig) -> list[str]:
+    """'left_knee_joint kp 120 vs 150 in the config' for every gain or default pose beyond its tolerance."""
+    problems = []
+    for i, act in enumerate(emb.actuators):
+        for key, ours, theirs in (("kp", contract.kp[i], act.kp), ("kd", contract.kd[i], act.kd)):
+            if not math.isclose(ours, theirs, rel_tol=GAIN_RTOL, abs_tol=GAIN_ATOL):
+                problems.append(f"{act.name} {key} {ours:g} vs {theirs:g} in the config")
+        if abs(contract.default_pose[i] - act.default) > DEFAULT_POSE_ATOL_RAD:
+            problems.append(f"{act.name} default pose {contract.default_pose[i]:.4f} vs {act.default:.4f} rad "
+                            "in the config")
+    return problems

@@ -152,6 +152,32 @@ def test_wrong_io_names(contract, tmp_path, names, expected):
         PolicyContract.from_onnx(path)
 
 
+def test_gains_within_tolerance_pass(contract, tmp_path):
+    path = _edited_yaml(tmp_path, lambda r: r["actuators"][4].update(kp=300 * (1 + 1e-4)))
+    check_against_embodiment(contract, path)
+
+
+def test_extra_outputs_are_refused(contract, tmp_path):
+    from onnx import TensorProto, helper, numpy_helper
+
+    n, a = contract.obs_dim, contract.num_actions
+    graph = helper.make_graph(
+        [helper.make_node("MatMul", ["obs", "W"], ["actions"]), helper.make_node("Identity", ["actions"], ["value"])],
+        "two_heads",
+        [helper.make_tensor_value_info("obs", TensorProto.FLOAT, ["b", n])],
+        [helper.make_tensor_value_info("actions", TensorProto.FLOAT, ["b", a]),
+         helper.make_tensor_value_info("value", TensorProto.FLOAT, ["b", a])],
+        initializer=[numpy_helper.from_array(np.zeros((n, a), np.float32), "W")],
+    )
+    model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)])
+    model.ir_version = 8
+    helper.set_model_props(model, contract.to_metadata())
+    path = tmp_path / "two_heads.onnx"
+    path.write_bytes(model.SerializeToString())
+    with pytest.raises(ContractError, match=r"exactly one output 'actions', got \['actions', 'value'\]"):
+        PolicyContract.from_onnx(path)
+
+
 def test_wrong_input_rank(contract, tmp_path):
     from onnx import TensorProto, helper
 
@@ -195,6 +221,9 @@ def _edited_yaml(tmp_path, edit) -> str:
     (lambda r: r.update(control_dt=0.02), "control_dt"),
     (lambda r: r.update(name="h1_inspire"), "embodiment is 'g1_inspire'"),
     (lambda r: r["hands"]["right"]["channels"][5].update(open_rad=-0.2), "hand right 'thumb_rotate' maps open/closed"),
+    (lambda r: r["actuators"][4].update(kp=40), "left_ankle_pitch_joint kp 300 vs 40 in the config"),
+    (lambda r: r["actuators"][3].update(kd=2.5), "left_knee_joint kd 4 vs 2.5 in the config"),
+    (lambda r: r["actuators"][18].update(default=0.8), "left_elbow_joint default pose 1.0000 vs 0.8000 rad"),
 ])
 def test_embodiment_mismatch_is_refused(contract, tmp_path, edit, expected):
     path = _edited_yaml(tmp_path, edit)
