@@ -35,6 +35,31 @@ def _register_unbuilt(subparsers, name: str) -> None:
     p.set_defaults(func=handler)
 
 
+class _ShowDefaults(argparse.HelpFormatter):
+    """Appends "(default: X)" to an option's help unless the help already names its default or there is none."""
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        text = action.help or ""
+        unset = action.default is None or action.default is False or action.default in ([], argparse.SUPPRESS)
+        if action.option_strings and not unset and "default" not in text.lower():
+            text += (" " if text else "") + "(default: %(default)s)"
+        return text
+
+
+class _ShowDefaultsRaw(_ShowDefaults, argparse.RawDescriptionHelpFormatter):
+    pass
+
+
+def _show_defaults(parser: argparse.ArgumentParser) -> None:
+    """Every (sub)command's --help lists its defaults, whichever module built the parser."""
+    raw = issubclass(parser.formatter_class, argparse.RawDescriptionHelpFormatter)
+    parser.formatter_class = _ShowDefaultsRaw if raw else _ShowDefaults
+    for action in parser._actions:  # argparse keeps subcommands only here
+        if isinstance(action, argparse._SubParsersAction):
+            for sub in action.choices.values():
+                _show_defaults(sub)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="robot-hoi",
@@ -52,6 +77,7 @@ def build_parser() -> argparse.ArgumentParser:
                 continue
             raise
         module.register(subparsers)
+    _show_defaults(parser)
     return parser
 
 

@@ -8,6 +8,8 @@ from __future__ import annotations
 import argparse
 import sys
 
+from robot_hoi.data.cli_options import add_clip_options, clip_options
+
 EPILOG = """examples:
   robot-hoi export onnx --untrained -o policies/untrained.onnx
   robot-hoi sim2sim --policy policies/untrained.onnx -o reports/untrained
@@ -34,6 +36,7 @@ def register(subparsers) -> None:
                         "the clip the policy names; use --clips for other clips")
     p.add_argument("--clips", nargs="+", default=None, metavar="CLIP",
                    help="evaluate on these clips (files, folders or embedded:lift_carry), retargeted as in training")
+    add_clip_options(p)
     p.add_argument("--suite", default="default", choices=("nominal", "default", "robust"),
                    help="nominal only; default = nominal + a few; robust = the full perturbation grid")
     p.add_argument("--perturbations", nargs="+", default=None, metavar="NAME",
@@ -72,7 +75,7 @@ def handler(args: argparse.Namespace) -> int:
         perturbations=args.perturbations, episodes=args.episodes, output=args.output, compare=args.compare,
         workers=args.workers, seconds=args.seconds, hand_transport=args.hand_bus, hand_link=args.hand_link,
         embodiment=args.embodiment, videos=args.videos, seed=args.seed, self_collision=not args.no_self_collision,
-        tracker_rate_hz=args.tracker_rate, quiet=args.quiet, argv=sys.argv[1:],
+        tracker_rate_hz=args.tracker_rate, quiet=args.quiet, argv=sys.argv[1:], clip_options=clip_options(args),
     )
     report, paths = evaluate(options)
     main = report["policies"][0]["label"]

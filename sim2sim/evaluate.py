@@ -39,6 +39,7 @@ class Sim2SimOptions:
     tracker_rate_hz: float = 120.0
     quiet: bool = False
     argv: list[str] = field(default_factory=list)
+    clip_options: dict = field(default_factory=dict)  # load_clip keywords (--objects, --repair)
 
 
 @dataclass
@@ -141,8 +142,9 @@ def evaluate(o: Sim2SimOptions) -> tuple[dict, dict[str, Path]]:
     say = (lambda *a: None) if o.quiet else (lambda *a: print(*a, file=sys.stderr, flush=True))
     for entry in entries:
         say(f"sim2sim: preparing {entry.label} ({entry.path})")
-        entry.targets = (clip_targets(entry.contract, o.clips, o.embodiment, o.self_collision) if o.clips
-                         else policy_targets(entry.contract, o.motion, o.embodiment, o.self_collision))
+        entry.targets = (clip_targets(entry.contract, o.clips, o.embodiment, o.self_collision, o.clip_options)
+                         if o.clips else
+                         policy_targets(entry.contract, o.motion, o.embodiment, o.self_collision, o.clip_options))
     terminations = task_config().terminations
     thresholds = Thresholds(**{k: getattr(terminations, k) for k in Thresholds.__dataclass_fields__})
 

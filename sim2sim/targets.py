@@ -71,7 +71,8 @@ def _target(clip, source: str, motion: ReferenceMotion, embodiment: str, self_co
                       license=license_)
 
 
-def policy_targets(contract, motion_path: str | None, embodiment: str, self_collision: bool) -> list[EvalTarget]:
+def policy_targets(contract, motion_path: str | None, embodiment: str, self_collision: bool,
+                   clip_options: dict | None = None) -> list[EvalTarget]:
     """The policy's own reference (its sidecar, or --motion) on the object of the clip it was exported with."""
     from deploy.errors import DeployError
     from deploy.motion import load_motion
@@ -97,10 +98,11 @@ def policy_targets(contract, motion_path: str | None, embodiment: str, self_coll
         raise UserError(f"{contract.source}: metadata names no clip to take the object from; pass --clips")
     if not source.startswith("embedded:") and not Path(source).is_file():
         raise UserError(f"{contract.source}: its clip {source} is not on this machine; pass --clips CLIP")
-    return [_target(load_source(source), source, motion, embodiment, self_collision, task_config())]
+    return [_target(load_source(source, clip_options), source, motion, embodiment, self_collision, task_config())]
 
 
-def clip_targets(contract, sources: list[str], embodiment: str, self_collision: bool) -> list[EvalTarget]:
+def clip_targets(contract, sources: list[str], embodiment: str, self_collision: bool,
+                 clip_options: dict | None = None) -> list[EvalTarget]:
     """Retarget each clip as training does and evaluate the policy on it (its reference replaces the sidecar)."""
     from deploy.errors import DeployError
     from robot_hoi.embodiment import load_embodiment
@@ -113,7 +115,7 @@ def clip_targets(contract, sources: list[str], embodiment: str, self_collision: 
     cfg = load_embodiment(embodiment)
     targets = []
     for source in expand_sources(sources):
-        clip = load_source(source)
+        clip = load_source(source, clip_options)
         if clip.object is None:
             raise UserError(f"{source}: clip {clip.name} has no object mesh; sim2sim needs the object")
         reference = build_reference(clip, load_or_retarget(clip, cfg, None), env_cfg.reference_links)

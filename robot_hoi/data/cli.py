@@ -9,6 +9,8 @@ import argparse
 import json
 import sys
 
+from robot_hoi.data.cli_options import add_clip_options
+
 KINDS = ("lift_carry", "push")  # robot_hoi.data.synth.KINDS (not imported: keeps --help light)
 ARTIFACTS = ("noise", "floating_contact", "penetration", "missing_frames", "dropped_frames")
 
@@ -18,22 +20,16 @@ def _split_list(values: list[str] | None) -> list[str]:
 
 
 def _add_loading_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument(
-        "--objects", metavar="DIR", help="folder with <object>/<object>.obj (default: <clip dir>/../objects)"
-    )
+    add_clip_options(p)
     p.add_argument(
         "--object-name", metavar="NAME", help="the object when the file is not named subX_OBJECT_NNN"
     )
     p.add_argument(
-        "--object-optional", action="store_true", help="go on without the object mesh (no inferred contacts)"
+        "--object-optional", action="store_true",
+        help="no object files: go on without an object (no inferred contacts) instead of estimating a box",
     )
     p.add_argument(
-        "--repair",
-        action="store_true",
-        help="fill frames holding NaN/inf by interpolation instead of failing",
-    )
-    p.add_argument(
-        "--min-duration", type=float, default=2.0, metavar="S", help="shortest acceptable clip (default 2 s)"
+        "--min-duration", type=float, default=2.0, metavar="S", help="shortest acceptable clip in seconds"
     )
 
 

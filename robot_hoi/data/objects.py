@@ -19,6 +19,8 @@ from robot_hoi.errors import DataError
 DEFAULT_NUM_SAMPLE_POINTS = 340  # what InterMimic ships per object
 DENSE_SAMPLES = 6000  # for distance queries: ~1.5 cm spacing on a 0.5 m box
 SAMPLE_SEED = 0
+BOX_DEFAULT_M = 0.4  # box edge when the clip says nothing about the object's size
+BOX_MIN_HALF_M = 0.05
 
 
 @dataclass(eq=False)
@@ -31,6 +33,7 @@ class ObjectAsset:
     sample_points: np.ndarray  # (N, 3) float64 surface samples
     mesh_file: str | None = None  # where the mesh came from (None: procedural)
     mass_kg: float | None = None  # None: use a density (InterMimic: 200 kg/m^3)
+    origin: str = "procedural"  # which of the dataset's files the shape came from (one line, for notes)
     _tree: cKDTree | None = field(default=None, init=False, repr=False)
     _hull: np.ndarray | None = field(default=None, init=False, repr=False)
 
@@ -91,48 +94,102 @@ def _check_points(points: np.ndarray, path: Path) -> np.ndarray:
     return points
 
 
-def load_object_asset(
-    name: str, objects_dir: str | Path, *, for_file: str | Path
-) -> tuple[ObjectAsset, list[str]]:
-    """Load `<objects_dir>/<name>/<name>.obj` and its `sample_points.npy`.
+def _usable(mesh, where: Path, for_file) -> tuple[np.ndarray, np.ndarray]:
+    vertices = np.asarray(getattr(mesh, "vertices", np.zeros((0, 3))), dtype=np.float64)
+    faces = np.asarray(getattr(mesh, "faces", np.zeros((0, 3))), dtype=np.int64)
+    if len(vertices) < 4 or len(faces) < 4 or not np.isfinite(vertices).all():
+        raise DataError(f"{for_file}: object mesh {where} has no usable triangles")
+    return vertices, faces
 
-    `for_file` is the clip that needs the object (named in errors). Returns the asset and notes about it (e.g.
-    sample points generated because the file is missing).
+
+def _read_mesh(path: Path, for_file):
+    import trimesh
+
+    try:
+        return trimesh.load(path, force="mesh", process=False)
+    except Exception as exc:  # trimesh raises many types for bad files
+        raise DataError(f"{for_file}: cannot read object mesh {path}: {exc}") from exc
+
+
+def _read_samples(folder: Path, for_file) -> np.ndarray | None:
+    path = folder / "sample_points.npy"
+    if not path.is_file():
+        return None
+    try:
+        points = np.load(path, allow_pickle=False)
+    except Exception as exc:  # ValueError for object arrays, OSError/EOFError for broken files
+        raise DataError(f"{for_file}: cannot read sample points {path}: {exc}") from exc
+    return _check_points(points, path)
+
+
+def load_object_asset(
+    name: str, objects_dir: str | Path, *, for_file: str | Path, clip=None
+) -> tuple[ObjectAsset, list[str]]:
+    """The object from what the dataset ships in `<objects_dir>/<name>/`, best first: `<name>.obj`, the geometry
+    of `<name>.urdf`, the convex hull of `sample_points.npy`, else (with `clip`, an HOIClip) a box from the clip.
+
+    `for_file` is the clip that needs the object (named in errors). Returns the asset and notes: the first one
+    says which source was used (`ObjectAsset.origin` holds the same line).
     """
     import trimesh
 
     folder = Path(objects_dir) / name
     mesh_path = folder / f"{name}.obj"
-    if not mesh_path.is_file():
-        raise DataError(
-            f"{for_file}: object mesh for '{name}' not found at {mesh_path} "
-            "(pass the objects folder, or treat the object as optional)"
-        )
-    try:
-        mesh = trimesh.load(mesh_path, force="mesh", process=False)
-    except Exception as exc:  # trimesh raises many types for bad files
-        raise DataError(f"{for_file}: cannot read object mesh {mesh_path}: {exc}") from exc
-    vertices = np.asarray(getattr(mesh, "vertices", np.zeros((0, 3))), dtype=np.float64)
-    faces = np.asarray(getattr(mesh, "faces", np.zeros((0, 3))), dtype=np.int64)
-    if len(vertices) < 4 or len(faces) < 4 or not np.isfinite(vertices).all():
-        raise DataError(f"{for_file}: object mesh {mesh_path} has no usable triangles")
-    notes: list[str] = []
-    samples_path = folder / "sample_points.npy"
-    if samples_path.is_file():
-        try:
-            points = np.load(samples_path, allow_pickle=False)
-        except Exception as exc:  # ValueError for object arrays, OSError/EOFError for broken files
-            raise DataError(f"{for_file}: cannot read sample points {samples_path}: {exc}") from exc
-        points = _check_points(points, samples_path)
+    samples = _read_samples(folder, for_file)
+    mass = None
+    if mesh_path.is_file():
+        mesh, origin = _read_mesh(mesh_path, for_file), f"mesh {mesh_path}"
     else:
+        from robot_hoi.data.object_urdf import urdf_geometry
+
+        urdf = folder / f"{name}.urdf"
+        mesh, mass, missing = urdf_geometry(urdf, folder, for_file) if urdf.is_file() else (None, None, "")
+        if mesh is not None:
+            origin = f"geometry of {urdf}"
+        elif samples is not None and len(samples) >= 4:
+            mesh = trimesh.convex.convex_hull(samples)
+            origin = f"convex hull of {folder / 'sample_points.npy'} (no {name}.obj{missing})"
+        elif clip is not None:
+            asset = box_from_clip(clip, name)
+            return asset, [f"object '{name}': {asset.origin}"]
+        else:
+            raise DataError(
+                f"{for_file}: nothing to build object '{name}' from in {folder} (no {name}.obj, {name}.urdf or "
+                "sample_points.npy); pass the objects folder with --objects DIR"
+            )
+    vertices, faces = _usable(mesh, folder, for_file)
+    notes = [f"object '{name}': {origin}"]
+    if samples is None:
         dense, _ = trimesh.sample.sample_surface(mesh, DEFAULT_NUM_SAMPLE_POINTS, seed=SAMPLE_SEED)
-        points = np.asarray(dense, dtype=np.float64)
+        samples = np.asarray(dense, dtype=np.float64)
         notes.append(
-            f"object '{name}': no sample_points.npy, sampled {len(points)} surface points from the mesh"
+            f"object '{name}': no sample_points.npy, sampled {len(samples)} surface points from the mesh"
         )
-    return ObjectAsset(
-        name=name, vertices=vertices, faces=faces, sample_points=points, mesh_file=str(mesh_path)
-    ), notes
+    mesh_file = str(mesh_path) if mesh_path.is_file() else None
+    return ObjectAsset(name=name, vertices=vertices, faces=faces, sample_points=samples, mesh_file=mesh_file,
+                       mass_kg=mass, origin=origin), notes
+
+
+def box_from_clip(clip, name: str) -> ObjectAsset:
+    """A box about the object's origin, just big enough to reach every body point the clip labels as touching
+    the object (stored per-body labels) and, along the local axis pointing down in the first frame, the floor
+    (the object rests on it there). Without labels: a BOX_DEFAULT_M cube."""
+    frames, bodies = np.nonzero(np.asarray(clip.body_contact) > 0)
+    if len(frames):
+        touching = np.asarray(clip.body_pos)[frames, bodies][:, None]
+        local = to_local(touching, np.asarray(clip.object_pos)[frames], np.asarray(clip.object_quat_xyzw)[frames])
+        half = np.percentile(np.abs(local[:, 0]), 98, axis=0)  # a few mislabelled frames do not inflate it
+    else:
+        half = np.full(3, BOX_DEFAULT_M / 2)
+    down = Rotation.from_quat(clip.object_quat_xyzw[0]).inv().apply([0.0, 0.0, -1.0])
+    axis = int(np.argmax(np.abs(down)))
+    half[axis] = max(half[axis], float(clip.object_pos[0, 2]))
+    size = 2 * np.maximum(half, BOX_MIN_HALF_M)
+    asset = box_asset(tuple(size), name=name)
+    how = "contact labels and floor" if len(frames) else f"no contact labels: a {BOX_DEFAULT_M:g} m cube"
+    asset.origin = (f"box {size[0]:.2f} x {size[1]:.2f} x {size[2]:.2f} m estimated from the clip ({how}); "
+                    "no mesh, URDF or sample points found")
+    return asset
 
 
 def box_asset(

@@ -16,9 +16,9 @@ from robot_hoi.data.contacts import ContactParams, infer_contacts
 from robot_hoi.data.intermimic import check_label_values, clip_from_matrix, read_intermimic_matrix
 from robot_hoi.data.objects import ObjectAsset, default_objects_dir, load_object_asset
 from robot_hoi.data.quirks import fix_quaternion_signs, fix_shifted_finger_rows, leading_placeholder_frames
-from robot_hoi.data.resample import fill_missing_frames
+from robot_hoi.data.resample import fill_frames, fill_missing_frames
 from robot_hoi.data.scale import subject_height
-from robot_hoi.data.validate import DEFAULT_MIN_DURATION_S, clip_warnings, validate_clip
+from robot_hoi.data.validate import DEFAULT_MIN_DURATION_S, clip_warnings, rotation_glitch_notes, validate_clip
 from robot_hoi.errors import DataError, UserError
 
 
@@ -34,9 +34,10 @@ def read_clip(
 ) -> HOIClip:
     """Load `.pt` (InterMimic) or `.npz` (native) and return a validated HOIClip.
 
-    objects_dir: folder with `<object>/<object>.obj` (default: `<clip_dir>/../objects`); object_optional: go on
-    without the mesh (no inferred contacts) instead of failing; repair_missing: interpolate NaN/inf frames
-    instead of failing; min_duration_s: None disables the length check.
+    objects_dir: folder with `<object>/` (mesh, URDF or sample points; default: `<clip_dir>/../objects`); when it
+    has none of them the object is a box estimated from the clip, unless object_optional: then no object (no
+    inferred contacts); repair_missing: interpolate NaN/inf frames
+    and one-frame root/object rotation spikes instead of failing; min_duration_s: None disables the length check.
     """
     path = Path(path)
     if not path.exists():
@@ -50,7 +51,9 @@ def read_clip(
     raise UserError(f"{path}: unknown clip format '{path.suffix}' (expected .pt or .npz)")
 
 
-def _load_object(path: Path, name: str, objects_dir, optional: bool) -> tuple[ObjectAsset | None, list[str]]:
+def _load_object(path: Path, clip: HOIClip, objects_dir, optional: bool) -> tuple[ObjectAsset | None, list[str]]:
+    """The clip's object from the dataset's files, else a box from the clip (object_optional: no object)."""
+    name = clip.object_name
     if not name:
         if optional:
             return None, ["object unknown (name is not subX_OBJECT_NNN): contacts not inferred"]
@@ -59,7 +62,7 @@ def _load_object(path: Path, name: str, objects_dir, optional: bool) -> tuple[Ob
         )
     folder = Path(objects_dir) if objects_dir is not None else default_objects_dir(path)
     try:
-        return load_object_asset(name, folder, for_file=path)
+        return load_object_asset(name, folder, for_file=path, clip=None if optional else clip)
     except DataError as exc:
         if optional:
             return None, [f"object not loaded ({exc}); contacts not inferred"]
@@ -71,10 +74,21 @@ def _finish(
 ) -> list[str]:
     if repair_missing:
         notes += fill_missing_frames(clip)
+        notes += _repair_rotation_glitches(clip)
     validate_clip(clip, path=path, min_duration_s=min_duration_s)
     notes += fix_quaternion_signs(clip)
     clip.body_pos, finger_notes = fix_shifted_finger_rows(clip.body_pos, clip.body_quat_xyzw)
     return notes + finger_notes
+
+
+def _repair_rotation_glitches(clip: HOIClip) -> list[str]:
+    """One-frame rotation spikes: the root's frame is re-interpolated whole (every body turns with the root), the
+    object's only in its pose."""
+    notes = []
+    for key, bad, what in rotation_glitch_notes(clip):
+        keys = None if key == "root_quat_xyzw" else ("object_pos", "object_quat_xyzw")
+        notes += fill_frames(clip, bad, f"where the {what}", keys)
+    return notes
 
 
 def _infer(clip: HOIClip, params: ContactParams | None) -> list[str]:
@@ -109,7 +123,7 @@ def read_intermimic_clip(path: Path, *, objects_dir, object_optional, object_nam
     clip.subject_height_m, clip.height_source = height.height_m, height.source
     if height.source == "estimated":
         notes.append(f"subject height unknown: estimated {height.height_m:.2f} m from the skeleton")
-    clip.object, object_notes = _load_object(path, clip.object_name, objects_dir, object_optional)
+    clip.object, object_notes = _load_object(path, clip, objects_dir, object_optional)
     notes += object_notes + _infer(clip, contact_params)
     clip.problems = notes + clip_warnings(clip)
     return clip
@@ -142,7 +156,7 @@ def read_native_clip(path: Path, *, objects_dir, object_optional, object_name, m
     if "object_vertices" in arrays:
         clip.object = _embedded_object(path, arrays, obj_name, meta)
     else:
-        clip.object, object_notes = _load_object(path, obj_name, objects_dir, object_optional)
+        clip.object, object_notes = _load_object(path, clip, objects_dir, object_optional)
         notes += object_notes + _infer(clip, contact_params)
     clip.problems = list(dict.fromkeys(notes + clip_warnings(clip)))  # keep order, drop repeats
     return clip

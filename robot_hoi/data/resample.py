@@ -95,7 +95,12 @@ def resample_clip(clip: HOIClip, fps: float) -> HOIClip:
 
 def fill_missing_frames(clip: HOIClip) -> list[str]:
     """Fill frames holding NaN/inf by interpolating the good frames around them (in place)."""
-    bad = nonfinite_frames(clip)
+    return fill_frames(clip, nonfinite_frames(clip), "with NaN/inf")
+
+
+def fill_frames(clip: HOIClip, bad: np.ndarray, reason: str, keys: tuple[str, ...] | None = None) -> list[str]:
+    """Replace the frames marked `bad` (T,) by interpolating the frames around them (in place); `keys` limits
+    which arrays are replaced (default: all). Returns the note for clip.problems."""
     if not bad.any():
         return []
     good = np.flatnonzero(~bad)
@@ -104,9 +109,8 @@ def fill_missing_frames(clip: HOIClip) -> list[str]:
     times = clip.times
     filled = _interpolated_arrays(clip, good, times[good], times[bad])
     for key, values in filled.items():
-        getattr(clip, key)[bad] = values
+        if keys is None or key in keys:
+            getattr(clip, key)[bad] = values
     for key in ("body_quat_xyzw", "root_quat_xyzw", "object_quat_xyzw"):
         setattr(clip, key, make_quaternions_continuous(getattr(clip, key))[0])
-    return [
-        f"repaired: {int(bad.sum())} frame(s) with NaN/inf ({format_segments(bad)}) filled by interpolation"
-    ]
+    return [f"repaired: {int(bad.sum())} frame(s) {reason} ({format_segments(bad)}) filled by interpolation"]

@@ -58,6 +58,7 @@ def clip_summary(clip: HOIClip, path: str | None = None) -> dict:
             "name": clip.object_name,
             "loaded": obj is not None,
             "mesh_file": obj.mesh_file if obj is not None else None,
+            "origin": obj.origin if obj is not None else None,
             "extents_m": [round(float(v), 3) for v in obj.extents] if obj is not None else None,
             "sample_points": int(len(obj.sample_points)) if obj is not None else 0,
             "mass_kg": obj.mass_kg if obj is not None else None,
@@ -65,7 +66,9 @@ def clip_summary(clip: HOIClip, path: str | None = None) -> dict:
         "contact": {
             "stored_frames": int(stored.sum()),
             "inferred_frames": int(clip.inferred_contact.sum()),
-            "agreement": round(float(np.mean(stored == clip.inferred_contact)), 3),
+            # None when nothing was inferred: matching "no contact" frames alone would read as agreement
+            "agreement": round(float(np.mean(stored == clip.inferred_contact)), 3)
+            if clip.inferred_contact.any() else None,
             "stored_segments": _segments(stored, clip.fps),
             "inferred_segments": _segments(clip.inferred_contact, clip.fps),
         },
@@ -85,6 +88,12 @@ def _fmt_segments(segments: list[dict]) -> str:
     )
 
 
+def _agreement(contact: dict, obj: dict) -> str:
+    if contact["agreement"] is not None:
+        return f"agree on {100 * contact['agreement']:.0f} % of frames"
+    return "no object, nothing inferred" if not obj["loaded"] else "no contact inferred, nothing to compare"
+
+
 def format_summary(report: dict) -> str:
     obj, contact, lift = report["object"], report["contact"], report["lift"]
     height = "unknown" if report["subject_height_m"] is None else f"{report['subject_height_m']:.3f} m"
@@ -94,8 +103,9 @@ def format_summary(report: dict) -> str:
         f"frames    {report['frames']} at {report['fps']:g} fps = {report['duration_s']:.2f} s",
         f"subject   {report['subject'] or 'unknown'}, height {height} ({report['height_source']})",
         f"object    {obj['name'] or 'unknown'}: {extents}, {obj['sample_points']} sample points",
+        f"          from {obj['origin'] or 'nothing (no object)'}",
         f"contact   stored:   {_fmt_segments(contact['stored_segments'])}",
-        f"          inferred: {_fmt_segments(contact['inferred_segments'])}  (agree on {100 * contact['agreement']:.0f} % of frames)",
+        f"          inferred: {_fmt_segments(contact['inferred_segments'])}  ({_agreement(contact, obj)})",
         f"lift      max {lift['max_height_m']:.2f} m at {lift['peak_time_s']:.2f} s ({lift['measured']}); "
         f"off the floor: {_fmt_segments(lift['lifted_segments'])}; moved {lift['object_travel_m']:.2f} m",
         f"license   {report['license']}",

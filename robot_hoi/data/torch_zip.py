@@ -33,6 +33,8 @@ _PUSH_ARG = {
     "BINUNICODE", "SHORT_BINUNICODE", "BINUNICODE8", "UNICODE", "BINSTRING", "SHORT_BINSTRING", "STRING",
 }  # fmt: skip
 _CONSTANTS = {"NEWTRUE": True, "NEWFALSE": False, "NONE": None}
+# A checkpoint or any saved dict/list uses one of these; a lone tensor never does.
+_CONTAINER_OPCODES = {"EMPTY_DICT", "DICT", "EMPTY_LIST", "LIST", "SETITEM", "SETITEMS", "APPENDS", "APPEND"}
 
 
 class _Global(tuple):
@@ -86,6 +88,11 @@ def _symbolic_unpickle(data: bytes, path: Path):
                 stack.append(("call", func, args))
             elif name == "STOP":
                 return stack.pop()
+            elif name in _CONTAINER_OPCODES:
+                raise DataError(
+                    f"{path}: holds a dict or list (a training checkpoint?), not one clip tensor; a checkpoint "
+                    "goes to `robot-hoi eval`, `robot-hoi play` or `robot-hoi export onnx`"
+                )
             else:
                 raise DataError(
                     f"{path}: data.pkl uses pickle opcode {name}, which a plain tensor file never does"

@@ -21,6 +21,10 @@ ROOT_TOLERANCE_M = 1e-3
 BONE_STD_WARN_M = 0.005
 FLOOR_WARN_M = -0.05
 ROOT_JUMP_WARN_M_S = 5.0
+# Fastest turn accepted between two frames: 10 deg at 30 fps. The shared OMOMO clips peak at 213 deg/s (the
+# physics-corrected take; 150 deg/s for the mocap), a MoCap glitch of 11.7 deg in one frame is 351 deg/s.
+ROT_JUMP_DEG_S = 300.0
+ROTATION_STREAMS = {"root_quat_xyzw": "root", "object_quat_xyzw": "object"}
 
 _FLOAT_FIELDS = ("root_pos", "root_quat_xyzw", "dof_rotvec", "body_pos", "body_quat_xyzw", "object_pos",
                  "object_quat_xyzw")  # fmt: skip
@@ -34,6 +38,38 @@ def nonfinite_frames(clip: HOIClip) -> np.ndarray:
         arr = getattr(clip, key)
         bad |= ~np.isfinite(arr.reshape(arr.shape[0], -1)).all(axis=1)
     return bad
+
+
+def rotation_steps_deg(quat_xyzw: np.ndarray) -> np.ndarray:
+    """(T-1,) angle in degrees between consecutive orientations (quaternion sign does not matter)."""
+    rot = Rotation.from_quat(quat_xyzw)
+    return np.degrees((rot[:-1].inv() * rot[1:]).magnitude())
+
+
+def rotation_glitches(quat_xyzw: np.ndarray, fps: float) -> np.ndarray:
+    """(T,) True at frames that turn away from both neighbours faster than ROT_JUMP_DEG_S while the neighbours
+    themselves agree: a one-frame spike, which interpolating the frame repairs safely."""
+    limit = ROT_JUMP_DEG_S / fps
+    bad = np.zeros(len(quat_xyzw), dtype=bool)
+    if len(quat_xyzw) < 3:
+        return bad
+    step = rotation_steps_deg(quat_xyzw)
+    rot = Rotation.from_quat(quat_xyzw)
+    across = np.degrees((rot[:-2].inv() * rot[2:]).magnitude())  # frame t-1 to t+1, skipping t
+    bad[1:-1] = (step[:-1] > limit) & (step[1:] > limit) & (across < np.minimum(step[:-1], step[1:]) / 2)
+    return bad
+
+
+def rotation_glitch_notes(clip: HOIClip) -> list[tuple[str, np.ndarray, str]]:
+    """(field, frames, description) per rotation stream with one-frame spikes."""
+    found = []
+    for key, label in ROTATION_STREAMS.items():
+        bad = rotation_glitches(getattr(clip, key), clip.fps)
+        if bad.any():
+            worst = float(np.max(rotation_steps_deg(getattr(clip, key))[np.flatnonzero(bad) - 1]))
+            found.append((key, bad, f"{label} rotation jumps {worst:.1f} deg for one frame and back "
+                                    f"({worst * clip.fps:.0f} deg/s > {ROT_JUMP_DEG_S:g})"))
+    return found
 
 
 def validate_clip(
@@ -54,8 +90,11 @@ def validate_clip(
     if bad.any():
         raise DataError(
             f"{path}: NaN or inf in {int(bad.sum())} frame(s) ({format_segments(bad)}); "
-            "repair them (load with repair_missing=True / `--repair`) or fix the file"
+            "repair them (`--repair` interpolates those frames) or fix the file"
         )
+    for _, bad, what in rotation_glitch_notes(clip):
+        raise DataError(f"{path}: {what} at frame(s) {format_segments(bad)}; repair them (`--repair` "
+                        "interpolates those frames) or fix the file")
     for key in _QUAT_FIELDS:
         q = getattr(clip, key)
         err = np.abs(np.linalg.norm(q, axis=-1) - 1.0)
@@ -121,4 +160,9 @@ def clip_warnings(clip: HOIClip) -> list[str]:
             f"root moves faster than {ROOT_JUMP_WARN_M_S:g} m/s after frame(s) {format_segments(jumps)} "
             "(dropped frames?)"
         )
+    for key, label in ROTATION_STREAMS.items():
+        fast = rotation_steps_deg(getattr(clip, key)) * clip.fps > ROT_JUMP_DEG_S
+        if fast.any():  # a lasting jump, not a one-frame spike: which side is right is unknown, so no repair
+            notes.append(f"{label} turns faster than {ROT_JUMP_DEG_S:g} deg/s after frame(s) "
+                         f"{format_segments(fast)} (dropped frames?)")
     return notes

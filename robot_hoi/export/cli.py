@@ -5,7 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from robot_hoi.paths import POLICIES_DIR, REPO_ROOT
+from robot_hoi.data.cli_options import add_clip_options, clip_options
+from robot_hoi.paths import POLICIES_DIR
 
 
 def register(subparsers) -> None:
@@ -14,30 +15,35 @@ def register(subparsers) -> None:
     sub = p.add_subparsers(dest="export_command", metavar="FORMAT", required=True)
     o = sub.add_parser("onnx", help="export a checkpoint to ONNX and verify it (checker, ORT == torch, latency)")
     o.add_argument("checkpoint", nargs="?", default=None,
-                   help="model_*.pt (default: the newest checkpoint under runs/)")
+                   help="model_*.pt, or a run or group folder (its latest checkpoint); required unless --untrained")
     o.add_argument("-o", "--output", default=None, help="output .onnx (default policies/<run>-<group>.onnx)")
-    o.add_argument("--recorded", type=int, default=1000, help="recorded observations to verify against")
+    o.add_argument("--recorded", type=int, default=1000,
+                   help="observations recorded in the training env to compare ONNX Runtime with torch on")
     o.add_argument("--untrained", action="store_true",
                    help="export a freshly initialised deployable (student-observation) policy for development, "
                         "with the reference motion of --data (default: the embedded clip)")
     o.add_argument("--data", nargs="*", default=None, help="with --untrained: the clip to track")
-    o.add_argument("--embodiment", default="g1_inspire", help="with --untrained")
+    o.add_argument("--embodiment", default="g1_inspire",
+                   help="with --untrained: robot name under configs/embodiments/ or a YAML path")
     o.add_argument("--seed", type=int, default=0, help="with --untrained")
     o.add_argument("--clip", default=None, help="student: the clip whose reference goes in the motion sidecar")
+    add_clip_options(o)
     o.set_defaults(func=run_onnx)
-    c = sub.add_parser("check", help="check an ONNX policy file against the deploy contract")
+    c = sub.add_parser("check", help="check an ONNX policy file against the deploy contract (exit 1: not "
+                                     "deployable, e.g. a teacher)")
     c.add_argument("file")
-    c.add_argument("--embodiment", default=None, help="also check it against this embodiment config")
+    c.add_argument("--embodiment", default=None,
+                   help="also check it against this robot (a name under configs/embodiments/ or a YAML path)")
     c.set_defaults(func=run_check)
 
 
-def newest_checkpoint(root: Path = REPO_ROOT / "runs") -> Path:
+def _no_checkpoint_named() -> None:
+    """Exporting whatever happens to be newest would deploy the wrong policy without a word: make the user say."""
     from robot_hoi.errors import UserError
 
-    found = sorted(root.glob("**/model_*.pt"), key=lambda p: p.stat().st_mtime)
-    if not found:
-        raise UserError(f"no checkpoint under {root}; train one first (robot-hoi train) or name it")
-    return found[-1]
+    found = sorted(Path("runs").glob("**/model_*.pt"), key=lambda p: p.stat().st_mtime)
+    hint = f"; the newest here is {found[-1]}" if found else ""
+    raise UserError(f"name the checkpoint to export (a model_*.pt or its run folder){hint}; or --untrained")
 
 
 def run_onnx(args: argparse.Namespace) -> int:
@@ -50,15 +56,15 @@ def run_onnx(args: argparse.Namespace) -> int:
     from robot_hoi.errors import UserError
     from robot_hoi.export.metadata import clip_identity, policy_metadata
     from robot_hoi.export.onnx_export import export_policy
-    from robot_hoi.rl.checkpoint import load_policy
+    from robot_hoi.rl.checkpoint import load_policy, resolve_checkpoint
     from robot_hoi.tasks.interaction import factory
     from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg
     from robot_hoi.tasks.interaction.mdp.observations import teacher_observation_spec
     from robot_hoi.utils.config import load_dataclass
 
-    ckpt = Path(args.checkpoint) if args.checkpoint else newest_checkpoint()
-    if not ckpt.is_file():
-        raise UserError(f"{ckpt}: no such checkpoint")
+    if not args.checkpoint:
+        _no_checkpoint_named()
+    ckpt = resolve_checkpoint(args.checkpoint)
     from robot_hoi.student.checkpoint import is_student_checkpoint
 
     if is_student_checkpoint(ckpt):
@@ -70,7 +76,7 @@ def run_onnx(args: argparse.Namespace) -> int:
     embodiment = load_embodiment(task["embodiment"])
     env_cfg = load_dataclass(InteractionEnvCfg, task["env"], f"{ckpt} task")
     env_cfg.num_envs = 16
-    clips = [factory.load_source(s) for s in task["sources"]]
+    clips = [factory.load_source(s, clip_options(args, task.get("clip_options"))) for s in task["sources"]]
     env = factory.make_env(clips, env_cfg, embodiment, cache=ckpt.parent / "references")
     if env.obs_dims["policy"] != model.num_actor_obs:
         raise UserError(f"{ckpt}: policy expects {model.num_actor_obs} observations, the task now gives "
@@ -106,6 +112,10 @@ def run_check(args: argparse.Namespace) -> int:
     metadata = check_onnx_file(args.file)
     kind = json.loads(metadata.get("policy_kind", '"unknown"'))
     print(f"{args.file}: valid ONNX, policy_kind {kind}, {len(metadata)} metadata keys")
+    if kind == "teacher":
+        print("not deployable: a teacher reads privileged simulation state the robot cannot measure; distil a "
+              "student (robot-hoi train student) and export that (robot-hoi play shows a teacher in simulation)")
+        return 1
     if kind != "teacher":
         from deploy.contract import PolicyContract, check_against_embodiment
 
@@ -160,7 +170,7 @@ def run_untrained(args: argparse.Namespace) -> int:
     env_cfg = load_yaml_dataclass(InteractionEnvCfg, TASK_CONFIG, ["num_envs=16", "psi.enabled=false"])
     env_cfg.student_obs_terms = tuple(STUDENT_TERMS)
     sources = factory.expand_sources(args.data)[:1]
-    clip = factory.load_source(sources[0])
+    clip = factory.load_source(sources[0], clip_options(args))
     env = factory.make_env([clip], env_cfg, embodiment)
     torch.manual_seed(args.seed)
     model = ActorCritic(env.obs_dims["student"], env.obs_dims["critic"], env.num_actions,

@@ -7,6 +7,8 @@ import json
 import sys
 from pathlib import Path
 
+from robot_hoi.data.cli_options import add_clip_options, clip_options
+
 
 def register(subparsers) -> None:
     p = subparsers.add_parser(
@@ -27,7 +29,7 @@ def register(subparsers) -> None:
     p.add_argument("--scale", type=float, help="human->robot scale (default robot_height / subject height)")
     p.add_argument("--anchor-mode", choices=("distance", "contact"), default="distance",
                    help="anchor weights from the distance to the object (default) or from the clip's contact labels")
-    p.add_argument("--objects-dir", help="object meshes folder for .pt clips (default <clip dir>/../objects)")
+    add_clip_options(p, "--objects-dir")  # --objects-dir: the old spelling, kept working
     p.add_argument("--json", action="store_true", help="print the report as JSON on stdout")
     p.set_defaults(func=run)
 
@@ -89,5 +91,4 @@ def _load(args: argparse.Namespace):
         return default_clip()
     from robot_hoi.data.clip import load_clip
 
-    kwargs = {"objects_dir": args.objects_dir} if args.objects_dir else {}
-    return load_clip(args.clip, **kwargs)
+    return load_clip(args.clip, **clip_options(args))

@@ -109,3 +109,26 @@ def prune_checkpoints(directory: Path, keep_last: int | None, pattern: str = "mo
     found = sorted((p for p in directory.glob(pattern) if iteration(p) >= 0), key=iteration)
     for old in found[:-keep_last]:
         old.unlink(missing_ok=True)
+
+
+def resolve_checkpoint(path: str | Path) -> Path:
+    """A checkpoint file as given, or the latest checkpoint of a group folder, or of the one group of a run folder
+    that holds checkpoints (model_final.pt, else the highest iteration)."""
+    from robot_hoi.rl.teacher_job import latest_checkpoint
+
+    path = Path(path)
+    if path.is_file():
+        return path
+    if not path.is_dir():
+        raise UserError(f"{path}: no such checkpoint or run folder")
+    found = latest_checkpoint(path)
+    if found is not None:
+        return found
+    groups = {sub.name: latest_checkpoint(sub) for sub in sorted(path.iterdir()) if sub.is_dir()}
+    groups = {name: ckpt for name, ckpt in groups.items() if ckpt is not None}
+    if len(groups) == 1:
+        return next(iter(groups.values()))
+    if not groups:
+        raise UserError(f"{path}: no model_*.pt in this folder or its group folders")
+    raise UserError(f"{path}: several groups have checkpoints ({', '.join(groups)}); name one, e.g. "
+                    f"{path / next(iter(groups))}")

@@ -6,7 +6,8 @@ import argparse
 import os
 from pathlib import Path
 
-from robot_hoi.paths import CONFIGS_DIR, REPO_ROOT
+from robot_hoi.data.cli_options import add_clip_options, clip_options
+from robot_hoi.paths import CONFIGS_DIR
 
 TASK_CONFIG = CONFIGS_DIR / "tasks" / "interaction.yaml"
 SUMMARY_FILE = "teachers.json"  # per-teacher summaries of the last `robot-hoi train` into this run folder
@@ -18,14 +19,20 @@ def register(subparsers) -> None:
                               description=__doc__)
     p.add_argument("stage", nargs="?", default="teacher", choices=["teacher", "student"],
                    help="teacher (default) or student (distillation from teachers)")
-    p.add_argument("--embodiment", default="g1_inspire")
+    p.add_argument("--embodiment", default="g1_inspire",
+                   help="robot: a name under configs/embodiments/ or a YAML path (robot-hoi model show lists it)")
     p.add_argument("--data", nargs="*", default=None,
-                   help="clip files or folders (.pt InterMimic format, .npz native); default: the embedded clip")
+                   help="clip files or folders (.pt InterMimic format, .npz native); default: the embedded clip. "
+                        "Put the stage (student) before --data, or end the list with --")
+    add_clip_options(p)
     p.add_argument("--group", default="subject", choices=["subject", "object", "clip"],
                    help="one teacher per group (default: per subject, as InterMimic)")
-    p.add_argument("--budget", default="5m", help="wall time (90s, 10m, 2h) or samples (200k, 5M); split evenly "
-                                                  "over the groups")
-    p.add_argument("--out", default=None, help="run folder (default runs/<date>-<embodiment>)")
+    p.add_argument("--budget", default="5m",
+                   help="training length, split evenly over the groups: wall time in s, m (minutes), h, d (90s, "
+                        "10m, 2h), samples in k, M (millions), G (200k, 5M) or iterations (300it); combine with "
+                        "commas (2h,50M: whichever comes first). Lower-case m is minutes, capital M is millions")
+    p.add_argument("--out", default=None, help="run folder (default: ./runs/<date>-<embodiment> in the current "
+                                               "directory)")
     p.add_argument("--preset", default="fast", choices=sorted(PRESETS),
                    help="PPO settings: paper = InterMimic Table C (tuned for 8192 GPU envs), fast = CPU-sized")
     p.add_argument("--config", default=None, help="a training YAML instead of the preset")
@@ -66,7 +73,21 @@ def register(subparsers) -> None:
     p.set_defaults(func=run)
 
 
+def _stage_from_data(args: argparse.Namespace) -> None:
+    """`train --data X student`: --data takes any number of values, so argparse files the stage under it."""
+    from robot_hoi.errors import UserError
+
+    stages = [d for d in args.data or [] if d in ("teacher", "student") and not Path(d).exists()]
+    if not stages:
+        return
+    if len(stages) > 1 or args.stage != "teacher":
+        raise UserError(f"give the stage once, got {', '.join([args.stage, *stages])}")
+    args.stage = stages[0]
+    args.data = [d for d in args.data if d != stages[0]] or None
+
+
 def run(args: argparse.Namespace) -> int:
+    _stage_from_data(args)
     if args.backend is not None:
         args.overrides = [*args.overrides, f"env.backend={args.backend}"]
     if args.stage == "student":
@@ -110,9 +131,13 @@ def run(args: argparse.Namespace) -> int:
     budget = parse_budget(args.budget)
 
     sources = factory.expand_sources(args.data)
-    clips = [factory.load_source(s) for s in sources]
+    options = clip_options(args)
+    clips = [factory.load_source(s, options) for s in sources]
+    for clip in clips:
+        if clip.object is not None:
+            print(f"{clip.name}: object {clip.object_name} from {clip.object.origin}")
     groups = factory.group_sources(sources, clips, args.group)
-    out = Path(args.out) if args.out else REPO_ROOT / "runs" / f"{time.strftime('%Y%m%d-%H%M%S')}-{embodiment.name}"
+    out = Path(args.out) if args.out else Path("runs") / f"{time.strftime('%Y%m%d-%H%M%S')}-{embodiment.name}"
     print(f"training {len(groups)} teacher(s) on {len(clips)} clip(s) -> {out}")
     per_group = _split_budget(budget, len(groups))
     token = uuid.uuid4().hex
@@ -120,7 +145,7 @@ def run(args: argparse.Namespace) -> int:
                        embodiment=embodiment.name, env_cfg=env_cfg, train_cfg=train_cfg, budget=per_group,
                        run_token=token, device=args.device, torch_threads=max(args.torch_threads, 1),
                        resume=args.resume, eval_episodes=args.eval_episodes,
-                       preempt_marker_dir=os.environ.get(PREEMPT_HOOK_ENV) or None)
+                       preempt_marker_dir=os.environ.get(PREEMPT_HOOK_ENV) or None, clip_options=options)
             for name, members in groups.items()]
     group_clips = [[clips[i] for i in members] for members in groups.values()]
     if args.cluster == "ray":

@@ -12,6 +12,7 @@ import argparse
 import json
 from pathlib import Path
 
+from robot_hoi.data.cli_options import add_clip_options, clip_options
 from robot_hoi.paths import CONFIGS_DIR
 
 TASK_CONFIG = CONFIGS_DIR / "tasks" / "interaction.yaml"
@@ -20,10 +21,12 @@ TASK_CONFIG = CONFIGS_DIR / "tasks" / "interaction.yaml"
 def register(subparsers) -> None:
     p = subparsers.add_parser("eval", help="evaluate a checkpoint: success, duration, E_h, E_o per clip",
                               description=__doc__)
-    p.add_argument("checkpoint", help="a model_*.pt from `robot-hoi train` or `robot-hoi train student`, or "
-                                      "`untrained` for a baseline")
+    p.add_argument("checkpoint", help="a model_*.pt from `robot-hoi train` or `robot-hoi train student`, a run or "
+                                      "group folder (its latest checkpoint), or `untrained` for a baseline")
     p.add_argument("--data", nargs="*", default=None, help="clips (default: the ones the checkpoint trained on)")
-    p.add_argument("--embodiment", default="g1_inspire")
+    add_clip_options(p)
+    p.add_argument("--embodiment", default="g1_inspire",
+                   help="robot: a name under configs/embodiments/ or a YAML path")
     p.add_argument("--episodes", type=int, default=8, help="episodes per clip (run in parallel)")
     p.add_argument("--preset", default="fast", choices=["fast", "paper"], help="network for `untrained`")
     p.add_argument("--seed", type=int, default=0)
@@ -46,13 +49,12 @@ def run(args: argparse.Namespace) -> int:
     if args.checkpoint == "untrained":
         env_cfg = load_yaml_dataclass(InteractionEnvCfg, TASK_CONFIG)
         sources = factory.expand_sources(args.data)
+        options = clip_options(args)
         model = None
     else:
-        ckpt = Path(args.checkpoint)
-        if not ckpt.is_file():
-            from robot_hoi.errors import UserError
+        from robot_hoi.rl.checkpoint import resolve_checkpoint
 
-            raise UserError(f"{ckpt}: no such checkpoint")
+        ckpt = resolve_checkpoint(args.checkpoint)
         from robot_hoi.student.checkpoint import is_student_checkpoint
 
         if is_student_checkpoint(ckpt):
@@ -64,12 +66,13 @@ def run(args: argparse.Namespace) -> int:
         env_cfg = load_dataclass(InteractionEnvCfg, task["env"], f"{ckpt} task") if task else \
             load_yaml_dataclass(InteractionEnvCfg, TASK_CONFIG)
         sources = task["sources"] if task else factory.expand_sources(args.data)
+        options = clip_options(args, task.get("clip_options") if task else None)
     embodiment = load_embodiment(args.embodiment)
     evaluation_settings(env_cfg, args.episodes, args.seed)
 
     results = {}
     for source in sources:
-        clip = factory.load_source(source)
+        clip = factory.load_source(source, options)
         env = factory.make_env([clip], env_cfg, embodiment)
         if model is None:
             torch.manual_seed(args.seed)

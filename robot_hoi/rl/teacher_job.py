@@ -22,7 +22,7 @@ import shutil
 import socket
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -57,6 +57,7 @@ class TeacherJob:
     eval_episodes: int = 4  # episodes per clip for eval.json
     eval_seed: int = 0
     preempt_marker_dir: str | None = None  # PREEMPT_HOOK_ENV, read by the driver
+    clip_options: dict = field(default_factory=dict)  # load_clip keywords (--objects, --repair), into task.json
 
     def at(self, run_dir: str | Path) -> TeacherJob:
         """The same job writing into another folder (a worker's local staging folder)."""
@@ -115,9 +116,9 @@ def train_teacher_group(job: TeacherJob, clips: list | None = None, log=print,
     run_dir = Path(job.run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
     if clips is None:
-        clips = [factory.load_source(s) for s in job.sources]
+        clips = [factory.load_source(s, job.clip_options) for s in job.sources]
     embodiment = load_embodiment(job.embodiment)
-    factory.write_task(run_dir, job.sources, job.env_cfg, embodiment.name, job.group)
+    factory.write_task(run_dir, job.sources, job.env_cfg, embodiment.name, job.group, job.clip_options)
 
     state = read_job_state(run_dir)
     same_invocation = state is not None and state["run_token"] == job.run_token

@@ -75,7 +75,7 @@ def evaluate_student(checkpoint: str | Path, data: list[str] | None = None, epis
     if data:
         embodiment = load_embodiment(task["embodiment"])
         for source in factory.expand_sources(data):
-            clip = factory.load_source(source)
+            clip = factory.load_source(source, task.get("clip_options"))
             cache = retarget_cache(task, folder, clip)
             cases.append(("mocap", clip, mocap_reference(clip, embodiment, env_cfg, cache)))
     else:

@@ -29,7 +29,6 @@ from pathlib import Path
 import torch
 
 from robot_hoi.errors import UserError
-from robot_hoi.paths import REPO_ROOT
 from robot_hoi.rl.budget import Budget, parse_budget
 from robot_hoi.student.config import PRESETS, StudentTrainConfig, load_student_config
 from robot_hoi.student.distributed import Rank, SharedBudget, state_checksum, sum_over_ranks
@@ -44,6 +43,7 @@ from robot_hoi.student.task import (
     write_student_task,
 )
 from robot_hoi.student.teachers import CompositeTeacher, TeacherMember, TeacherRun, load_teacher_runs
+from robot_hoi.data.cli_options import clip_options
 from robot_hoi.tasks.interaction import factory
 from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg
 from robot_hoi.utils.atomic import atomic_write_text
@@ -104,16 +104,17 @@ def prepare(args: argparse.Namespace) -> Setup:
             if source not in sources:  # a clip two teachers trained on goes to the first
                 sources.append(source)
                 clip_teacher.append(index)
-    clips = [factory.load_source(s) for s in sources]
+    options = clip_options(args, runs[0].task.get("clip_options"))
+    clips = [factory.load_source(s, options) for s in sources]
     check_single_object(clips)
     source_run = {s: runs[clip_teacher[i]] for i, s in enumerate(sources)}
     mocap = [mocap_reference(c, embodiment, teacher_env_cfg, source_run[s].checkpoint.parent / "references")
              for c, s in zip(clips, sources, strict=True)]
-    out = Path(args.out) if args.out else REPO_ROOT / "runs" / f"{time.strftime('%Y%m%d-%H%M%S')}-student"
+    out = Path(args.out) if args.out else Path("runs") / f"{time.strftime('%Y%m%d-%H%M%S')}-student"
     members = [TeacherMember(run.name, run.model, run.checkpoint, run.obs_groups, run.action_offset) for run in runs]
     return Setup(cfg, env_cfg, teacher_env_cfg, embodiment, runs, sources, clips, mocap,
                  make_scene(clips[0], embodiment, env_cfg), out, args.device, members, clip_teacher,
-                 [0] * len(sources))
+                 [0] * len(sources), {"clip_options": options})
 
 
 def rollout_env(setup: Setup, index: int, cfg: InteractionEnvCfg | None = None):

@@ -93,7 +93,7 @@ def task_references(task: dict, folder: Path, env_cfg: InteractionEnvCfg, refere
 
     embodiment = load_embodiment(task["embodiment"])
     sources = list(task["sources"])
-    clips = [factory.load_source(s) for s in sources]
+    clips = [factory.load_source(s, task.get("clip_options")) for s in sources]
     check_single_object(clips)
     references = []
     for clip, rel in zip(clips, task["references"], strict=True):

@@ -68,10 +68,10 @@ def test_bad_contact_labels(motions, tmp_path, raw):
     _fails(_write(tmp_path, raw), motions, "labels")
 
 
-def test_missing_mesh(motions, tmp_path, raw):
+def test_missing_mesh_gives_a_box_from_the_clip(motions, tmp_path, raw):
     path = _write(tmp_path, raw)
-    with pytest.raises(DataError, match=rf"{NAME}\.pt.*largebox.*not found"):
-        load_clip(path)  # default objects dir next to the clip: tmp_path/../objects does not exist
+    clip = load_clip(path)  # default objects dir next to the clip: tmp_path/../objects does not exist
+    assert clip.object.origin.startswith("box ") and any("object 'largebox': box" in p for p in clip.problems)
 
 
 def test_cli_prints_one_line_and_exits_2(motions, tmp_path, raw, capsys):

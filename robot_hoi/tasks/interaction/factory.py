@@ -44,15 +44,16 @@ def expand_sources(data: list[str] | None) -> list[str]:
     return sources
 
 
-def load_source(source: str):
-    """One clip from a source string (validated by the data layer)."""
+def load_source(source: str, clip_options: dict | None = None):
+    """One clip from a source string (validated by the data layer); clip_options: load_clip keywords
+    (robot_hoi.data.cli_options: objects folder, repair)."""
     if source.startswith(EMBEDDED_PREFIX):
         from robot_hoi.data.synth import default_clip
 
         return default_clip(kind=source[len(EMBEDDED_PREFIX):])
     from robot_hoi.data.clip import load_clip
 
-    return load_clip(source)
+    return load_clip(source, **(clip_options or {}))
 
 
 def group_sources(sources: list[str], clips: list, by: str) -> dict[str, list[int]]:
@@ -104,8 +105,9 @@ def make_env(clips: list, env_cfg: InteractionEnvCfg, embodiment, cache: Path | 
 
 
 def write_task(run_dir: Path, sources: list[str], env_cfg: InteractionEnvCfg, embodiment_name: str,
-               group: str) -> None:
-    info = {"sources": sources, "group": group, "embodiment": embodiment_name, "env": asdict(env_cfg)}
+               group: str, clip_options: dict | None = None) -> None:
+    info = {"sources": sources, "clip_options": clip_options or {}, "group": group, "embodiment": embodiment_name,
+            "env": asdict(env_cfg)}
     atomic_write_text(run_dir / TASK_FILE, json.dumps(info, indent=2) + "\n")
 
 
