@@ -8,7 +8,7 @@ exactly for the reset environments.
 
 Implementations: `MujocoCpuBackend` (mujoco.rollout with a persistent thread pool, float64) and `MujocoWarpBackend`
 (mujoco_warp worlds on a CUDA device or warp's CPU device, float32; tensors stay where the physics is).
-`auto` picks warp when warp sees a CUDA device, else cpu.
+`auto` picks warp on this process's CUDA device when there is one (robot_hoi/sim/device.py), else cpu.
 """
 
 from __future__ import annotations
@@ -65,21 +65,20 @@ class PhysicsBackend(ABC):
     def sensordata(self) -> Tensor:
         """(num_envs, nsensordata) view of the latest sensor readings."""
 
+    def physics_report(self) -> dict[str, float]:
+        """Scalars on the physics' health since the last call (overflow flags, buffer use; one host sync), for the
+        runner to log every few iterations. Raises a UserError naming the buffer to raise when one overflowed."""
+        return {}
+
 
 def make_backend(name: str, model: mujoco.MjModel, num_envs: int, decimation: int, **kwargs) -> PhysicsBackend:
-    from robot_hoi.errors import UserError
+    from robot_hoi.sim.device import resolve_physics
 
-    if name == "auto":
-        from robot_hoi.sim.warp_backend import cuda_available
-
-        name = "warp" if cuda_available() else "cpu"
+    name, device = resolve_physics(name, kwargs.pop("device", None))
     if name == "cpu":
         from robot_hoi.sim.mujoco_cpu import MujocoCpuBackend
 
-        kwargs.pop("device", None)
         return MujocoCpuBackend(model, num_envs, decimation, **kwargs)
-    if name == "warp":
-        from robot_hoi.sim.warp_backend import MujocoWarpBackend
+    from robot_hoi.sim.warp_backend import MujocoWarpBackend
 
-        return MujocoWarpBackend(model, num_envs, decimation, **kwargs)
-    raise UserError(f"unknown physics backend {name!r} (choose cpu, warp or auto)")
+    return MujocoWarpBackend(model, num_envs, decimation, device=device, **kwargs)

@@ -1,6 +1,6 @@
 """MuJoCo Warp backend vs the CPU backend: same model, same states and targets, short horizons.
 
-Runs on warp's CPU device here (a CUDA device when present). Tolerances are float32 round-off grown over
+Runs on warp's CPU device here (a CUDA device when present); every comparison is made on the CPU. Tolerances are float32 round-off grown over
 15 control steps of the standing G1 with a resting box (measured: qpos ~1e-6, qvel ~5e-5, link positions ~1e-6,
 contact forces ~1e-2 N). Outside that regime the engines may part on purpose: MJWarp keeps up to 8 box-plane
 contacts where MuJoCo C keeps 4, so a sole driven centimetres into the floor diverges within a step.
@@ -53,7 +53,7 @@ def test_warp_steps_like_the_cpu_backend(scene):
         ctrl = default + 0.03 * torch.randn(NUM_ENVS, scene.model.nu, generator=generator, dtype=torch.float64)
         cpu.step(ctrl)
         warp.step(ctrl)
-    w_qpos, w_qvel, w_sens = warp.qpos.double(), warp.qvel.double(), warp.sensordata.double()
+    w_qpos, w_qvel, w_sens = warp.qpos.double().cpu(), warp.qvel.double().cpu(), warp.sensordata.double().cpu()
     torch.testing.assert_close(w_qpos, cpu.qpos, atol=1e-4, rtol=0)
     torch.testing.assert_close(w_qvel, cpu.qvel, atol=1e-3, rtol=0)
     torch.testing.assert_close(w_sens[:, layout.link_pos], cpu.sensordata[:, layout.link_pos], atol=1e-4, rtol=0)
@@ -80,9 +80,9 @@ def test_set_state_recomputes_sensors_of_reset_worlds_only(scene):
     warp.set_state(torch.tensor([2]), moved, qvel[2:3])
     cpu.set_state(torch.tensor([2]), moved, qvel[2:3])
     layout = scene.layout
-    torch.testing.assert_close(warp.sensordata[2, layout.link_pos].double(), cpu.sensordata[2, layout.link_pos],
-                               atol=1e-5, rtol=0)
-    assert torch.equal(warp.sensordata[0], untouched)
+    torch.testing.assert_close(warp.sensordata[2, layout.link_pos].double().cpu(),
+                               cpu.sensordata[2, layout.link_pos], atol=1e-5, rtol=0)
+    assert torch.equal(warp.sensordata[0], untouched)  # both on the warp device
     assert warp.qpos[2, 0].item() == pytest.approx(moved[0, 0].item(), abs=1e-6)
 
 
@@ -93,22 +93,46 @@ def test_interaction_env_runs_unchanged_on_warp():
     for backend in ("cpu", "warp"):
         cfg = load_yaml_dataclass(InteractionEnvCfg, TASK_CONFIG, [f"backend={backend}", f"num_envs={NUM_ENVS}"])
         envs[backend] = factory.make_env([clip], cfg, embodiment)
+    on_cpu = lambda *values: [v.cpu() for v in values]  # noqa: E731
     obs = {name: env.reset() for name, env in envs.items()}
-    torch.testing.assert_close(obs["warp"]["policy"], obs["cpu"]["policy"], atol=1e-4, rtol=0)
+    torch.testing.assert_close(*on_cpu(obs["warp"]["policy"], obs["cpu"]["policy"]), atol=1e-4, rtol=0)
     generator = torch.Generator().manual_seed(1)
     for _ in range(10):
         actions = 0.2 * torch.randn(NUM_ENVS, envs["cpu"].num_actions, generator=generator)
-        (o_c, r_c, t_c, tr_c, _), (o_w, r_w, t_w, tr_w, _) = envs["cpu"].step(actions), envs["warp"].step(actions)
-        torch.testing.assert_close(o_w["policy"], o_c["policy"], atol=2e-2, rtol=0)
+        o_c, r_c, t_c, tr_c, _ = envs["cpu"].step(actions)
+        o_w, r_w, t_w, tr_w, _ = envs["warp"].step(actions.to(envs["warp"].device))
+        o_w, r_w, t_w, tr_w = on_cpu(o_w["policy"], r_w, t_w, tr_w)
+        torch.testing.assert_close(o_w, o_c["policy"], atol=2e-2, rtol=0)
         torch.testing.assert_close(r_w, r_c, atol=1e-2, rtol=0)
         assert torch.equal(t_w, t_c) and torch.equal(tr_w, tr_c)
 
 
 def test_auto_picks_a_backend_that_exists(scene):
-    from robot_hoi.sim.warp_backend import cuda_available
-
     backend = make_backend("auto", scene.model, 2, scene.embodiment.decimation)
-    assert type(backend).__name__ == ("MujocoWarpBackend" if cuda_available() else "MujocoCpuBackend")
+    assert type(backend).__name__ == ("MujocoWarpBackend" if torch.cuda.is_available() else "MujocoCpuBackend")
+
+
+def test_overflow_flags_are_read_cleared_and_name_the_buffer_to_raise(scene):
+    import mujoco_warp
+
+    from robot_hoi.errors import UserError
+
+    warp = scene.make_backend(NUM_ENVS, "warp")
+    qpos, qvel = _standing_states(scene)
+    warp.set_state(torch.arange(NUM_ENVS), qpos, qvel)
+    warp.step(torch.tensor(scene.embodiment.default_pos).repeat(NUM_ENVS, 1))
+    kind = mujoco_warp.OverflowType
+    warp._overflow_t[1] = int(kind.ITERATIONS)  # a solver limit: counted, not an error
+    report = warp.physics_report()
+    assert report["Physics/solver_iteration_limit_worlds"] == 1.0
+    assert 0 < report["Physics/constraint_rows_max"] <= 544 and report["Physics/contacts_per_world_max"] > 0
+    assert warp.physics_report()["Physics/solver_iteration_limit_worlds"] == 0.0  # cleared after reading
+    warp._overflow_t[2] = int(kind.NEFC)
+    with pytest.raises(UserError, match="EXTRA_CONSTRAINT_ROWS"):
+        warp.physics_report()
+    warp._overflow_t[3] = int(kind.NARROWPHASE)
+    with pytest.raises(UserError, match="CONTACTS_PER_WORLD"):
+        warp.physics_report()
 
 
 def test_train_cli_runs_a_teacher_on_the_warp_backend(tmp_path):
