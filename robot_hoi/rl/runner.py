@@ -18,14 +18,6 @@ from pathlib import Path
 from typing import Any
 
 import torch
-from rich.progress import (
-    BarColumn,
-    Progress,
-    TaskProgressColumn,
-    TextColumn,
-    TimeElapsedColumn,
-    TimeRemainingColumn,
-)
 from torch import Tensor
 
 from robot_hoi.errors import UserError
@@ -42,6 +34,7 @@ from robot_hoi.rl.env import VecEnv, concat_groups, group_dim
 from robot_hoi.rl.logger import JsonlWriter, Logger, LogWriter, TensorBoardWriter
 from robot_hoi.rl.models import ActorCritic
 from robot_hoi.rl.ppo import PPO
+from robot_hoi.rl.progress import progress_text, training_progress
 from robot_hoi.utils.atomic import atomic_write_text
 
 _PPO_SCALARS = {
@@ -129,16 +122,7 @@ class OnPolicyRunner:
         self._write_run_info()
         start = time.monotonic()
         first_iteration, first_samples = self.iteration, self.total_samples
-        progress = Progress(
-            TextColumn("[bold]{task.description}"),
-            BarColumn(),
-            TaskProgressColumn(),
-            TimeElapsedColumn(),
-            TextColumn("ETA"),
-            TimeRemainingColumn(),
-            disable=not self.cfg.runner.progress,
-            transient=False,
-        )
+        progress = training_progress(self.cfg.runner.progress)  # plain lines when stdout is not a terminal
         last_saved = -1
         try:
             with progress:
@@ -158,7 +142,7 @@ class OnPolicyRunner:
             "mean_return": self.mean_return(),
         }
 
-    def _train_loop(self, budget: Budget, progress: Progress, task, start: float) -> int:
+    def _train_loop(self, budget: Budget, progress, task, start: float) -> int:
         """Iterate until the budget is spent; returns the iteration of the last periodic checkpoint (-1: none)."""
         batch = self.alg.storage.batch_size
         samples = iterations = 0
@@ -175,7 +159,7 @@ class OnPolicyRunner:
             samples += batch
             self.total_samples += batch
             self.total_time_s += t2 - t0
-            self._log(stats, env_logs, collection_s=t1 - t0, learning_s=t2 - t1)
+            scalars = self._log(stats, env_logs, collection_s=t1 - t0, learning_s=t2 - t1)
             if self.iteration % self.cfg.runner.save_interval == 0:
                 self._save_periodic()
                 last_saved = self.iteration
@@ -183,7 +167,7 @@ class OnPolicyRunner:
             progress.update(
                 task,
                 completed=int(1000 * budget.fraction_done(elapsed, samples, iterations)),
-                description=self._progress_text(batch / max(t2 - t0, 1e-9)),
+                description=progress_text(self.iteration, batch / max(t2 - t0, 1e-9), scalars),
             )
             if budget.exhausted(elapsed, samples, iterations):
                 break
@@ -238,12 +222,9 @@ class OnPolicyRunner:
         """Mean undiscounted return of the last `episode_window` finished episodes (nan before any finished)."""
         return sum(self.recent_returns) / len(self.recent_returns) if self.recent_returns else float("nan")
 
-    def _progress_text(self, samples_per_s: float) -> str:
-        return f"it {self.iteration} | return {self.mean_return():.3g} | {samples_per_s:,.0f} samples/s"
-
     def _log(
         self, stats: dict[str, float], env_logs: dict[str, float], collection_s: float, learning_s: float
-    ):
+    ) -> dict[str, float]:
         batch = self.alg.storage.batch_size
         scalars = {_PPO_SCALARS.get(k, f"Loss/{k}"): v for k, v in stats.items()}
         if self.recent_returns:
@@ -255,6 +236,7 @@ class OnPolicyRunner:
         scalars["Perf/total_samples"] = float(self.total_samples)
         scalars.update(env_logs)
         self.logger.log_scalars(scalars, self.iteration)
+        return scalars
 
     # --- checkpoints -------------------------------------------------------------------------------------------
     def _git(self) -> dict[str, str]:

@@ -166,7 +166,7 @@ class DistillationRunner(OnPolicyRunner):
             scalars["Perf/ranks"] = float(self.rank.world_size)
             scalars["Perf/samples_per_s_all_ranks"] = self.rank.world_size * batch / max(collection_s + learning_s,
                                                                                          1e-9)
-        super()._log(stats, {**env_logs, **scalars}, collection_s, learning_s)
+        return super()._log(stats, {**env_logs, **scalars}, collection_s, learning_s)
 
     # --- checkpoints ---------------------------------------------------------------------------------------------
     def save(self, path: str | Path) -> Path:
