@@ -94,12 +94,13 @@ class RunnerConfig:
     episode_window: int = 100  # finished episodes averaged for mean return / length
     tensorboard: bool = True
     progress: bool = True  # rich progress bar with ETA against the budget
+    physics_check_interval: int = 50  # iterations between reads of the physics' overflow flags (one host sync)
 
     def __post_init__(self) -> None:
         if not self.actor_obs_groups or not self.critic_obs_groups:
             raise ValueError("actor_obs_groups and critic_obs_groups must name at least one group")
-        if self.save_interval <= 0 or self.episode_window <= 0:
-            raise ValueError("save_interval and episode_window must be positive")
+        if self.save_interval <= 0 or self.episode_window <= 0 or self.physics_check_interval <= 0:
+            raise ValueError("save_interval, episode_window and physics_check_interval must be positive")
         if self.keep_last is not None and self.keep_last <= 0:
             raise ValueError("keep_last must be positive or null")
 

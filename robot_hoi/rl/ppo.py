@@ -117,22 +117,21 @@ class PPO:
         """Store the step. Time-outs (truncated, not terminated) are bootstrapped: r += gamma * V(final state).
 
         final_critic_obs (N, critic_dim) is the pre-reset critic observation (only rows of truncated envs are
-        read). Without it V(final state) is approximated by V of the step's own start state, as rsl_rl does.
+        used). Without it V(final state) is approximated by V of the step's own start state, as rsl_rl does.
+        Masked arithmetic over all rows: no host sync.
         """
         if self._pending is None:
             raise RuntimeError("process_env_step called without act()")
         pending, self._pending = self._pending, None
-        rewards = rewards.to(self.device, torch.float32).clone()
+        rewards = rewards.to(self.device, torch.float32)
         terminated = terminated.to(self.device, torch.bool)
         truncated = truncated.to(self.device, torch.bool)
         timeouts = truncated & ~terminated
-        if bool(timeouts.any()):
-            idx = timeouts.nonzero().squeeze(-1)
-            if final_critic_obs is not None:
-                bootstrap = self.model.evaluate(final_critic_obs[idx].to(self.device))
-            else:
-                bootstrap = pending["values"][idx]
-            rewards[idx] += self.cfg.gamma * bootstrap
+        if final_critic_obs is not None:
+            bootstrap = self.model.evaluate(final_critic_obs.to(self.device))
+        else:
+            bootstrap = pending["values"]
+        rewards = rewards + self.cfg.gamma * torch.where(timeouts, bootstrap, 0.0)
         self.storage.add(**pending, rewards=rewards, dones=terminated | truncated)
 
     @torch.no_grad()
@@ -141,25 +140,21 @@ class PPO:
 
     # --- update ----------------------------------------------------------------------------------------------
     def update(self) -> dict[str, float]:
-        """Run the mini-epochs over the stored rollout; returns averaged loss and monitoring scalars."""
+        """Run the mini-epochs over the stored rollout; returns averaged loss and monitoring scalars (the
+        minibatches' values stay on the device until one transfer at the end)."""
         cfg = self.cfg
-        totals: dict[str, float] = {}
-        count = 0
-        for batch in self.storage.minibatches(
-            self.num_minibatches(), cfg.num_epochs, cfg.normalize_advantage
-        ):
-            stats = self._update_minibatch(batch)
-            for key, value in stats.items():
-                totals[key] = totals.get(key, 0.0) + value
-            count += 1
+        stats = [self._update_minibatch(batch) for batch in
+                 self.storage.minibatches(self.num_minibatches(), cfg.num_epochs, cfg.normalize_advantage)]
         self.storage.clear()
-        result = {key: value / count for key, value in totals.items()}
+        keys = list(stats[0])
+        means = [torch.stack([s[key] for s in stats]).mean() for key in keys]
+        values = torch.stack([*means, self.model.action_std.detach().mean()]).tolist()
+        result = dict(zip([*keys, "action_std"], values, strict=True))
         result["actor_lr"] = self.actor_lr
         result["critic_lr"] = self.critic_optimizer.param_groups[0]["lr"]
-        result["action_std"] = float(self.model.action_std.detach().mean())
         return result
 
-    def _update_minibatch(self, batch: Minibatch) -> dict[str, float]:
+    def _update_minibatch(self, batch: Minibatch) -> dict[str, Tensor]:
         cfg = self.cfg
         dist = self.model.distribution_normalized(batch.actor_input)
         log_probs = dist.log_prob(batch.actions).sum(dim=-1)
@@ -201,18 +196,11 @@ class PPO:
             kl = gaussian_kl(batch.old_mean, batch.old_std, dist.mean, dist.stddev)
             clip_fraction = ((ratio - 1.0).abs() > cfg.clip_ratio).float().mean()
         if cfg.desired_kl is not None:
-            self._adapt_actor_lr(float(kl))
-        return {
-            "surrogate_loss": float(surrogate.detach()),
-            "value_loss": float(value_loss.detach()),
-            "bound_loss": float(bound.detach()),
-            "entropy": float(entropy.detach()),
-            "extra_actor_loss": float(extra.detach()),
-            "kl": float(kl.detach()),
-            "clip_fraction": float(clip_fraction.detach()),
-            "actor_grad_norm": float(actor_grad.detach()),
-            "critic_grad_norm": float(critic_grad.detach()),
-        }
+            self._adapt_actor_lr(float(kl))  # the adaptive rate needs the KL on the host each minibatch
+        detached = {"surrogate_loss": surrogate, "value_loss": value_loss, "bound_loss": bound, "entropy": entropy,
+                    "extra_actor_loss": extra, "kl": kl, "clip_fraction": clip_fraction,
+                    "actor_grad_norm": actor_grad, "critic_grad_norm": critic_grad}
+        return {key: value.detach().float() for key, value in detached.items()}
 
     def _adapt_actor_lr(self, kl: float) -> None:
         cfg = self.cfg

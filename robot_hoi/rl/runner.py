@@ -35,6 +35,7 @@ from robot_hoi.rl.logger import JsonlWriter, Logger, LogWriter, TensorBoardWrite
 from robot_hoi.rl.models import ActorCritic
 from robot_hoi.rl.ppo import PPO
 from robot_hoi.rl.progress import progress_text, training_progress
+from robot_hoi.rl.step_log import StepLog
 from robot_hoi.utils.atomic import atomic_write_text
 
 _PPO_SCALARS = {
@@ -159,6 +160,8 @@ class OnPolicyRunner:
             samples += batch
             self.total_samples += batch
             self.total_time_s += t2 - t0
+            if self.iteration % self.cfg.runner.physics_check_interval == 0:
+                env_logs.update(self.physics_report())
             scalars = self._log(stats, env_logs, collection_s=t1 - t0, learning_s=t2 - t1)
             if self.iteration % self.cfg.runner.save_interval == 0:
                 self._save_periodic()
@@ -175,19 +178,11 @@ class OnPolicyRunner:
 
     @torch.no_grad()
     def _rollout(self) -> dict[str, float]:
-        sums: dict[str, Any] = {}
-        counts: dict[str, int] = {}
-
-        def add(name: str, value: Any) -> None:
-            # Tensor values stay on their device until the end of the rollout: no GPU sync per step.
-            if isinstance(value, Tensor):
-                total, n = value.detach().float().sum(), value.numel()
-            else:
-                total, n = float(value), 1
-            if n:
-                sums[name] = sums.get(name, 0.0) + total
-                counts[name] = counts.get(name, 0) + n
-
+        """One horizon of env steps into the storage. Nothing is read back to the host per step: log values and
+        finished episodes stay on the device until one transfer at the end (StepLog.to_host)."""
+        log = StepLog(self.device)
+        ended_returns: list[Tensor] = []
+        ended_lengths: list[Tensor] = []
         critic_groups = self.cfg.runner.critic_obs_groups
         for _ in range(self.cfg.ppo.horizon):
             actor_obs, critic_obs, extra_obs = self._split(self._obs)
@@ -206,17 +201,25 @@ class OnPolicyRunner:
             self._ep_return += rewards
             self._ep_length += 1
             done = terminated | truncated
-            if bool(done.any()):
-                self.recent_returns.extend(self._ep_return[done].tolist())
-                self.recent_lengths.extend(self._ep_length[done].tolist())
-                self._ep_return[done] = 0.0
-                self._ep_length[done] = 0.0
+            ended_returns.append(torch.where(done, self._ep_return, torch.nan))
+            ended_lengths.append(torch.where(done, self._ep_length, torch.nan))
+            self._ep_return.masked_fill_(done, 0.0)
+            self._ep_length.masked_fill_(done, 0.0)
             for name, value in extras.get("log", {}).items():
-                add(name, value)
+                log.add(name, value)
             for name, value in extras.get("episode_done", {}).items():
-                add(f"Episode/{name}", value)
+                log.add(f"Episode/{name}", value)
         self.alg.compute_returns(concat_groups(self._obs, critic_groups))
-        return {name: float(sums[name]) / counts[name] for name in sums}
+        means, returns, lengths = log.to_host(torch.stack(ended_returns), torch.stack(ended_lengths))
+        self.recent_returns.extend(returns)
+        self.recent_lengths.extend(lengths)
+        return means
+
+    def physics_report(self) -> dict[str, float]:
+        """The physics backend's health scalars (warp: overflow flags, buffer use), read every
+        runner.physics_check_interval iterations; raises when a buffer overflowed."""
+        report = getattr(getattr(self.env, "backend", None), "physics_report", None)
+        return report() if report is not None else {}
 
     def mean_return(self) -> float:
         """Mean undiscounted return of the last `episode_window` finished episodes (nan before any finished)."""
