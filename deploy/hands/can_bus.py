@@ -1,5 +1,7 @@
 """Inspire hand over CAN 2.0B (python-can: socketcan, slcan, pcan, virtual, ... chosen by name).
 
+Both hands on one channel share one python-can Bus (deploy.hands.shared_can): replies reach each hand by its id.
+
 Register groups travel in chunks of at most 8 bytes (see can_frames). By default all chunks of one group are
 sent back to back and their replies collected together (`pipeline=True`): every chunk has its own identifier,
 so replies cannot be confused, and the bus is not left idle between frames. Set pipeline=False to wait for each
@@ -8,26 +10,19 @@ reply before sending the next request, for firmware that cannot queue requests.
 
 from __future__ import annotations
 
-import logging
-import socket
-import struct
+import queue
 import time
 from collections import Counter
 
-import can
 import numpy as np
 
 from deploy.hands import tables
 from deploy.hands.can_frames import MAX_HAND_ID, RW_READ, RW_WRITE, Pending, chunks, classify_reply
 from deploy.hands.register_bus import AttemptFailed, PortUnavailable, RegisterHandBus
+from deploy.hands.shared_can import OPEN_ERRORS, LinkBroken, SharedCanBus
 from deploy.hands.tables import Register
 
 DEFAULT_TIMEOUT_S = 0.02
-SOL_CAN_RAW = getattr(socket, "SOL_CAN_RAW", 101)  # linux/can.h: SOL_CAN_BASE + CAN_RAW
-CAN_RAW_ERR_FILTER = 2  # linux/can/raw.h; Python's socket module does not export it
-CAN_ERR_MASK = getattr(socket, "CAN_ERR_MASK", 0x1FFFFFFF)
-log = logging.getLogger("deploy.hands")
-OPEN_ERRORS = (can.CanError, OSError, ValueError, ImportError, NotImplementedError)
 
 
 class CanHandBus(RegisterHandBus):
@@ -57,7 +52,8 @@ class CanHandBus(RegisterHandBus):
         self.bus_options = dict(bus_options or {})
         self.error_frames = 0  # CAN error frames seen on the bus while waiting for replies
         self._read_plans: dict[tuple[str, ...], list] = {}
-        self._bus: can.BusABC | None = None
+        self._link: SharedCanBus | None = None
+        self._replies: queue.SimpleQueue | None = None
         super().__init__(
             side,
             hand_id=hand_id,
@@ -71,38 +67,17 @@ class CanHandBus(RegisterHandBus):
         return f"CAN {self.interface}:{self.channel} @ {self.bitrate / 1e6:g} Mbit/s"
 
     def _open(self) -> None:
-        options = dict(self.bus_options)
-        if self.interface == "socketcan":  # kernel filter: only our hand's frames reach this socket
-            options.setdefault(
-                "can_filters", [{"can_id": self.hand_id, "can_mask": MAX_HAND_ID, "extended": True}]
-            )
         try:
-            self._bus = can.Bus(
-                interface=self.interface, channel=self.channel, bitrate=self.bitrate, **options
-            )
+            self._link, self._replies = SharedCanBus.attach(self.interface, self.channel, self.bitrate,
+                                                            self.bus_options, self.hand_id)
         except OPEN_ERRORS as exc:
-            self._bus = None
+            self._link = self._replies = None
             raise PortUnavailable(f"{type(exc).__name__}: {exc}") from exc
-        self._receive_error_frames()
-
-    def _receive_error_frames(self) -> None:
-        """SocketCAN delivers error frames only when asked (CAN_RAW_ERR_FILTER); other interfaces report them
-        on their own or not at all."""
-        sock = getattr(self._bus, "socket", None)
-        if self.interface != "socketcan" or sock is None:
-            return
-        try:
-            sock.setsockopt(SOL_CAN_RAW, CAN_RAW_ERR_FILTER, struct.pack("=I", CAN_ERR_MASK))
-        except OSError as exc:
-            log.debug("%s: error frames stay off: %s", self.name, exc)
 
     def _close(self) -> None:
-        if self._bus is not None:
-            try:
-                self._bus.shutdown()
-            except (can.CanError, OSError):
-                pass
-            self._bus = None
+        if self._link is not None:
+            self._link.detach(self.hand_id)
+            self._link = self._replies = None
 
     def _read_block(self, regs: tuple[Register, ...]) -> list[np.ndarray]:
         return self._read_blocks([regs])[0]
@@ -139,39 +114,47 @@ class CanHandBus(RegisterHandBus):
             )
 
     def _exchange(self, pending: list[Pending]) -> dict[Pending, bytes]:
-        bus = self._bus
-        if bus is None:
+        link, replies = self._link, self._replies
+        if link is None or replies is None:
             raise AttemptFailed("disconnected", "CAN bus is closed")
         got: dict[Pending, bytes] = {}
         seen: Counter = Counter()
         deadline = time.monotonic() + self.timeout
         try:
-            while bus.recv(0) is not None:  # late replies to an earlier try must not answer this one
-                pass
+            while not replies.empty():  # late replies to an earlier try must not answer this one
+                if isinstance(replies.get_nowait(), LinkBroken) and link.broken:  # else: already reopened
+                    raise LinkBroken(link.broken)
             groups = [pending] if self.pipeline else [[p] for p in pending]
             for group in groups:
                 for p in group:
-                    bus.send(p.message, timeout=self.timeout)
-                self._collect(bus, {p.arbitration_id: p for p in group}, got, seen, deadline)
-        except can.CanError as exc:
-            raise AttemptFailed("disconnected", f"{type(exc).__name__}: {exc}") from exc
+                    link.send(p.message, timeout=self.timeout)
+                self._collect(replies, {p.arbitration_id: p for p in group}, got, seen, deadline)
+        except LinkBroken as exc:
+            raise AttemptFailed("disconnected", str(exc)) from exc
         return got
 
     def _collect(
-        self, bus: can.BusABC, outstanding: dict[int, Pending], got: dict, seen: Counter, deadline: float
+        self, replies: queue.SimpleQueue, outstanding: dict[int, Pending], got: dict, seen: Counter, deadline: float
     ) -> None:
         while outstanding:
             remaining = deadline - time.monotonic()
-            msg = bus.recv(remaining) if remaining > 0 else None
+            try:
+                msg = replies.get(timeout=remaining) if remaining > 0 else None
+            except queue.Empty:
+                msg = None
             if msg is None:
                 break
-            pend = outstanding.get(msg.arbitration_id) if not msg.is_error_frame else None
+            if isinstance(msg, LinkBroken):
+                if self._link is None or self._link.broken:  # else: a stale marker, already reopened
+                    raise msg
+                continue
             if msg.is_error_frame:
                 self.error_frames += 1
                 seen["error_frame"] += 1
                 continue
+            pend = outstanding.get(msg.arbitration_id)
             if pend is None:
-                continue  # traffic for another hand or another node
+                continue  # another register of ours, late, or traffic for another node
             verdict = classify_reply(msg, pend)
             if verdict == "ok":
                 got[pend] = bytes(msg.data)
