@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import argparse
 import json
-from pathlib import Path
 
 from robot_hoi.data.cli_options import add_clip_options, clip_options
 from robot_hoi.paths import CONFIGS_DIR
@@ -42,6 +41,7 @@ def run(args: argparse.Namespace) -> int:
     from robot_hoi.rl.cli import PRESETS
     from robot_hoi.rl.config import load_train_config
     from robot_hoi.rl.models import ActorCritic
+    from robot_hoi.sim.device import resolve_env_cfg
     from robot_hoi.tasks.interaction import factory
     from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg
     from robot_hoi.utils.config import load_dataclass, load_yaml_dataclass
@@ -69,6 +69,7 @@ def run(args: argparse.Namespace) -> int:
         options = clip_options(args, task.get("clip_options") if task else None)
     embodiment = load_embodiment(args.embodiment)
     evaluation_settings(env_cfg, args.episodes, args.seed)
+    env_cfg = resolve_env_cfg(env_cfg)  # once: every clip's env on the same device, the model moved there
 
     results = {}
     for source in sources:
@@ -79,7 +80,7 @@ def run(args: argparse.Namespace) -> int:
             train_cfg = load_train_config(PRESETS[args.preset])
             model = ActorCritic(env.obs_dims["policy"], env.obs_dims["critic"], env.num_actions, train_cfg.model)
             model.eval()
-        results[clip.name] = evaluate(env, model)
+        results[clip.name] = evaluate(env, model.to(env.device))
     summary = summarise(results)
     if args.json:
         print(json.dumps({"checkpoint": args.checkpoint, "clips": results, "mean": summary}, indent=2))
@@ -100,17 +101,20 @@ def evaluation_settings(env_cfg, episodes: int, seed: int) -> None:
 def evaluate(env, model, stochastic: bool = False) -> dict[str, float]:
     """Run each env until its first episode ends; average InterMimic's metrics over those episodes.
 
-    Actions are the policy mean, or samples of the policy's Gaussian with `stochastic` (seed torch first)."""
+    Actions are the policy mean, or samples of the policy's Gaussian with `stochastic` (seed torch first). The
+    model runs where its parameters are, the env where its physics is: observations and actions cross over."""
     import torch
 
+    policy_device = next(model.parameters()).device
     obs = env.reset()
     finished: dict[str, list[torch.Tensor]] = {}
-    counted = torch.zeros(env.num_envs, dtype=torch.bool)
-    returns = torch.zeros(env.num_envs)
+    counted = torch.zeros(env.num_envs, dtype=torch.bool, device=env.device)
+    returns = torch.zeros(env.num_envs, device=env.device)
     with torch.no_grad():
         for _ in range(env.max_episode_length + env.cfg.warmup_frames + 2):
-            actions = model.act(obs["policy"]) if stochastic else model.act_inference(obs["policy"])
-            obs, reward, terminated, truncated, extras = env.step(actions)
+            policy_obs = obs["policy"].to(policy_device)
+            actions = model.act(policy_obs) if stochastic else model.act_inference(policy_obs)
+            obs, reward, terminated, truncated, extras = env.step(actions.to(env.device))
             returns += torch.where(counted, 0.0, reward)
             done = terminated | truncated
             new = done & ~counted

@@ -109,6 +109,7 @@ def train_teacher_group(job: TeacherJob, clips: list | None = None, log=print,
     from robot_hoi.embodiment import load_embodiment
     from robot_hoi.rl.checkpoint import read_checkpoint
     from robot_hoi.rl.runner import OnPolicyRunner
+    from robot_hoi.sim.device import check_gpu_memory, policy_device, resolve_env_cfg
     from robot_hoi.tasks.interaction import factory
 
     started = time.monotonic()
@@ -132,7 +133,11 @@ def train_teacher_group(job: TeacherJob, clips: list | None = None, log=print,
         _trim_scalars(run_dir / SCALARS_FILE, int(read_checkpoint(resume_from)["iteration"]))
 
     torch.manual_seed(job.train_cfg.seed)
-    env = factory.make_env(clips, job.env_cfg, embodiment, cache=run_dir / "references")
+    # The physics device, chosen once in this process (a Ray worker: its own GPU); training and evaluation envs
+    # are built from this resolved config (task.json keeps the requested one, re-resolved where it is read).
+    env_cfg = resolve_env_cfg(job.env_cfg)
+    check_gpu_memory(env_cfg)
+    env = factory.make_env(clips, env_cfg, embodiment, cache=run_dir / "references")
     runner = OnPolicyRunner(env, job.train_cfg, run_dir, device=policy_device(job.device, env.device))
     runner.on_checkpoint = on_checkpoint
     resumed_from = None
@@ -158,8 +163,7 @@ def train_teacher_group(job: TeacherJob, clips: list | None = None, log=print,
     checkpoint = run_dir / f"model_{runner.iteration}.pt"  # learn() always ends with this one
     checkpoint = checkpoint if checkpoint.exists() else latest_checkpoint(run_dir)
 
-    model = runner.model.to("cpu").eval()  # evaluation envs hand over CPU tensors
-    evaluation = evaluate_group(model, clips, job, embodiment, run_dir / "references")
+    evaluation = evaluate_group(runner.model.eval(), clips, job, env_cfg, embodiment, run_dir / "references")
     evaluation.update(group=job.group, checkpoint=checkpoint.name if checkpoint else None,
                       iteration=runner.iteration)
     atomic_write_text(run_dir / EVAL_FILE, json.dumps(evaluation, indent=2) + "\n")
@@ -179,14 +183,15 @@ def train_teacher_group(job: TeacherJob, clips: list | None = None, log=print,
     }
 
 
-def evaluate_group(model, clips: list, job: TeacherJob, embodiment, cache: Path) -> dict[str, Any]:
-    """eval_cli's evaluation (stand starts, policy mean, no noise) on each clip of the group."""
+def evaluate_group(model, clips: list, job: TeacherJob, env_cfg, embodiment, cache: Path) -> dict[str, Any]:
+    """eval_cli's evaluation (stand starts, policy mean, no noise) on each clip of the group, in envs of the
+    training env's (resolved) config: where the model is."""
     from robot_hoi.rl.eval_cli import evaluate, evaluation_settings, summarise
     from robot_hoi.tasks.interaction import factory
 
     results = {}
     for clip in clips:
-        cfg = copy.deepcopy(job.env_cfg)
+        cfg = copy.deepcopy(env_cfg)
         evaluation_settings(cfg, job.eval_episodes, job.eval_seed)
         results[clip.name] = evaluate(factory.make_env([clip], cfg, embodiment, cache=cache), model)
     return {"episodes_per_clip": job.eval_episodes, "seed": job.eval_seed, "clips": results,
@@ -263,14 +268,3 @@ def print_summary(summaries: dict[str, dict], failures: dict[str, str], title: s
     console.print(table)
     for name, error in failures.items():
         console.print(f"{name}: {error}", markup=False, highlight=False)
-
-
-def policy_device(requested: str, env_device):
-    """`auto`: the physics' device when it is a GPU, else a CUDA device when there is one, else the CPU."""
-    import torch
-
-    if requested != "auto":
-        return torch.device(requested)
-    if env_device.type == "cuda":
-        return env_device
-    return torch.device("cuda" if torch.cuda.is_available() else "cpu")

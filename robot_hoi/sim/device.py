@@ -82,6 +82,22 @@ def resolve_env_cfg(cfg):
     return resolved
 
 
+PHYSICS_BYTES_PER_WORLD = 260_000  # measured: ~254 KB of mujoco_warp data per world (G1 + Inspire + object)
+
+
+def check_gpu_memory(cfg) -> None:
+    """Refuse a warp pool whose physics alone does not fit in its GPU's free memory (e.g. fractional Ray GPUs
+    packing several teachers onto one), rather than failing on an allocation minutes later."""
+    if cfg.backend != "warp" or not str(cfg.sim_device).startswith("cuda"):
+        return
+    free, _ = torch.cuda.mem_get_info(torch.device(cfg.sim_device))
+    need = cfg.num_envs * PHYSICS_BYTES_PER_WORLD
+    if need > free:
+        raise UserError(f"{cfg.num_envs} warp worlds need ~{need / 1e9:.1f} GB on {cfg.sim_device} for the physics "
+                        f"alone, {free / 1e9:.1f} GB are free (teachers sharing the GPU? raise --gpus-per-teacher or "
+                        "lower env.num_envs)")
+
+
 def physics_device(cfg) -> torch.device:
     """The torch device of a resolved env config's physics tensors."""
     return torch.device(cfg.sim_device if cfg.backend == "warp" else "cpu")

@@ -63,3 +63,15 @@ def test_resolved_env_config_is_concrete_and_resolving_again_changes_nothing(cud
     again = dev.resolve_env_cfg(resolved)
     assert (again.backend, again.sim_device) == ("warp", "cuda:3")
     assert dev.physics_device(resolved) == torch.device("cuda:3")
+
+
+def test_a_warp_pool_that_does_not_fit_the_free_gpu_memory_is_refused(monkeypatch):
+    cfg = InteractionEnvCfg(num_envs=4096)
+    cfg.backend, cfg.sim_device = "warp", "cuda:0"
+    monkeypatch.setattr(torch.cuda, "mem_get_info", lambda device: (int(0.5e9), int(80e9)))
+    with pytest.raises(UserError, match="--gpus-per-teacher"):
+        dev.check_gpu_memory(cfg)
+    monkeypatch.setattr(torch.cuda, "mem_get_info", lambda device: (int(40e9), int(80e9)))
+    dev.check_gpu_memory(cfg)
+    cfg.sim_device = "cpu"
+    dev.check_gpu_memory(cfg)  # warp's CPU device: nothing to check
