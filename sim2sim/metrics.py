@@ -18,6 +18,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from robot_hoi import termination
+from robot_hoi.termination import interaction_weights  # noqa: F401  (re-exported: sim2sim's callers use it)
+
 HAND_LINK_MARKERS = ("_tip", "hand_base")  # = robot_hoi.tasks.interaction.scene_setup (E_h excludes these)
 EPS = 1e-4
 
@@ -62,22 +65,14 @@ def nearest_surface_vectors(link_pos: np.ndarray, points_world: np.ndarray) -> n
     return nearest - link_pos
 
 
-def interaction_weights(d: np.ndarray, d_hat: np.ndarray) -> np.ndarray:
-    """InterMimic Eq. 2: w_d = 0.5 normalised 1/|d|^2 (simulation) + 0.5 the same of the reference. (..., L)."""
-    inv = 1.0 / np.maximum((d * d).sum(-1), EPS)
-    inv_hat = 1.0 / np.maximum((d_hat * d_hat).sum(-1), EPS)
-    return 0.5 * inv / inv.sum(-1, keepdims=True) + 0.5 * inv_hat / inv_hat.sum(-1, keepdims=True)
-
-
 def interaction_distance_error(d: np.ndarray, d_hat: np.ndarray) -> np.ndarray:
     """|<w_d, |d|> - <w_d, |d_hat|>|, the interaction early-termination quantity (Sec. 3.2)."""
-    w = interaction_weights(d, d_hat)
-    return np.abs((w * np.linalg.norm(d, axis=-1)).sum(-1) - (w * np.linalg.norm(d_hat, axis=-1)).sum(-1))
+    return termination.interaction_distance_error(interaction_weights(d, d_hat), d, d_hat)
 
 
 def mean_position_error(pos: np.ndarray, ref: np.ndarray) -> np.ndarray:
     """(T, J, 3) x2 -> (T,) mean over J of |p - p^| (m)."""
-    return np.linalg.norm(np.asarray(pos) - np.asarray(ref), axis=-1).mean(-1)
+    return termination.mean_link_error(np.asarray(pos), np.asarray(ref))
 
 
 def mpjpe_global(pos: np.ndarray, ref: np.ndarray) -> float:

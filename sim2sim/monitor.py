@@ -19,20 +19,11 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from deploy.operator import OperatorInput
+from robot_hoi import termination
+from robot_hoi.termination import Thresholds
 from deploy.safety import Phase
 from sim2sim import metrics
 from sim2sim.world import SimWorld
-
-
-@dataclass(frozen=True)
-class Thresholds:
-    """InterMimic early termination (supp. E.1 and Sec. 3.2), as robot_hoi TerminationCfg names them."""
-
-    max_mean_link_error: float = 0.5
-    min_root_height: float = 0.15
-    max_mean_object_point_error: float = 0.5
-    max_interaction_distance_error: float = 0.5
-    max_contact_loss_frames: int = 10
 
 
 @dataclass
@@ -63,6 +54,7 @@ class EpisodeMonitor(OperatorInput):
         self.keep_qpos = keep_qpos
         self.runtime = None
         self._tree = cKDTree(ref.points_local)
+        self._hand_links = termination.hand_link_groups(world.layout.links.names)
         # per policy tick t >= 1 (frames that count): what the metrics need
         self.ticks: list[int] = []
         self.frames: list[int] = []
@@ -129,20 +121,14 @@ class EpisodeMonitor(OperatorInput):
         self.interaction_error.append(inter_err)
 
         th = self.thresholds
-        reasons = []
-        if link_err > th.max_mean_link_error:
-            reasons.append("link_deviation")
-        if world.data.qpos[2] < th.min_root_height:
-            reasons.append("root_too_low")
-        if obj_err > th.max_mean_object_point_error:
-            reasons.append("object_deviation")
-        if inter_err > th.max_interaction_distance_error:
-            reasons.append("interaction_distance")
         if self.ref.hand_contact is not None and tick > self.warmup_frames:  # training: not during warmup
-            need = self.ref.hand_contact[f]
-            self.contact_loss = np.where(need & ~world.hand_contact(), self.contact_loss + 1, 0)
-            if self.contact_loss.max() > th.max_contact_loss_frames:
-                reasons.append("contact_lost")
+            distance = np.linalg.norm(d, axis=-1)
+            nearest = np.array([distance[ids].min() for ids in self._hand_links])
+            self.contact_loss = termination.contact_loss_count(
+                self.contact_loss, self.ref.hand_contact[f], world.hand_contact(), nearest, th.contact_tolerance)
+        ended = termination.reasons(th, np.float64(link_err), world.data.qpos[2], np.float64(obj_err),
+                                    np.float64(inter_err), self.contact_loss)
+        reasons = [name for name, hit in ended.items() if hit]
         if reasons:
             self.terminations = reasons
             self.finished = True

@@ -11,7 +11,7 @@ import sys
 
 from robot_hoi.data.cli_options import add_clip_options
 
-KINDS = ("lift_carry", "push")  # robot_hoi.data.synth.KINDS (not imported: keeps --help light)
+KINDS = ("lift_carry", "push", "lift_place")  # robot_hoi.data.synth.KINDS (not imported: keeps --help light)
 ARTIFACTS = ("noise", "floating_contact", "penetration", "missing_frames", "dropped_frames")
 
 
@@ -134,7 +134,7 @@ def register(subparsers) -> None:
     c.set_defaults(func=_convert)
 
     v = sub.add_parser("view", help="draw human, object and robot at one metric scale (png strip or mp4)")
-    v.add_argument("clip", metavar="CLIP", help=".pt, .npz, or embedded:lift_carry / embedded:push")
+    v.add_argument("clip", metavar="CLIP", help=".pt, .npz, or embedded:lift_carry / embedded:push / embedded:lift_place")
     v.add_argument("--embodiment", default="g1_inspire", help="robot drawn beside the human ('' for none)")
     v.add_argument("-o", "--output", required=True, metavar="OUT.png|OUT.mp4")
     v.add_argument("--keyframes", type=int, default=6, help="panels in a png strip (default 6)")

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
+from robot_hoi import termination
 from robot_hoi.errors import UserError
 from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg
 from robot_hoi.tasks.interaction.mdp import observations as obs_terms
@@ -88,14 +89,19 @@ class InteractionEnv:
         self.reward_weights = {n: t.weight for n, t in cfg.rewards.items() if t is not None}
         self.reward_funcs = {n: (reward_terms.REWARD_TERMS[t.func], t.params)
                              for n, t in cfg.rewards.items() if t is not None}
-        self.max_episode_length = cfg.max_episode_frames
+        # an episode from the stand must be able to cover the longest clip plus its warmup
+        longest = int((self.clip_end - self.clip_start).max()) + 1
+        self.max_episode_length = max(cfg.max_episode_frames, longest + cfg.warmup_frames + 1)
+        self._rsi_noise_qpos = torch.as_tensor(
+            [q for q, name in zip(layout.actuator_qpos, layout.actuator_names, strict=True) if name not in hand_joints],
+            device=self.device)
         self.psi = PsiBuffer(cfg.psi, state_dim=layout.robot_nq + layout.robot_nv + 13, generator=self.generator)
         if cfg.psi.enabled:  # the buffer starts with the reference-derived states (RSI), supp. E.2 (i)
             lo, hi = cfg.init.start_range
             frames = torch.cat([torch.arange(int(s + lo * (e - s)), max(int(s + hi * (e - s)), int(s + lo * (e - s)) + 1),
                                              device=self.device)
                                 for s, e in zip(self.clip_start.tolist(), self.clip_end.tolist(), strict=True)])
-            self.psi.seed_from_reference(self._reference_states(frames), frames)
+            self.psi.seed_from_reference(frames)
         self._allocate()
         self.reset()
         self.obs_dims = {name: value.shape[1] for name, value in self._observations().items()}
@@ -121,6 +127,9 @@ class InteractionEnv:
         self.clip_start = torch.cumsum(lengths, 0) - lengths
         self.clip_end = self.clip_start + lengths - 1
         self.object_points = _subsample(references[0].object_points, self.cfg.object_surface_points).to(self.device)
+        # d_hat from the same surface samples the simulation's d uses (else |d_hat - d| > 0 on the reference itself)
+        ref_points_world = self.object_points @ self.ref_object_rotmat.transpose(-1, -2) + self.ref_object_pos[:, None]
+        self.ref_d_hat = nearest_surface_vectors(self.ref_link_pos, ref_points_world)
         wrists = [self.layout.link_names.index(n) for n in ("left_wrist_yaw_link", "right_wrist_yaw_link")]
         self.ref_hand_distance = self.ref_d_hat[:, wrists].norm(dim=-1)
         self.total_frames = int(lengths.sum())
@@ -133,6 +142,8 @@ class InteractionEnv:
         self.ref_index = z(n, dtype=torch.long)
         self.warmup_left = z(n, dtype=torch.long)
         self.episode_length = z(n, dtype=torch.long)
+        self.tracked_steps = z(n, dtype=torch.long)   # steps after the warmup: what duration and errors cover
+        self.start_frame = z(n, dtype=torch.long)
         self.contact_loss_frames = z(n, 2, dtype=torch.long)
         self.prev_link_vel = z(n, self.layout.num_links, 3)
         self.prev_object_vel = z(n, 3)
@@ -152,13 +163,15 @@ class InteractionEnv:
         in_warmup = self.warmup_left > 0
         self.warmup_left = (self.warmup_left - 1).clamp(min=0)
         self.ref_index = torch.where(in_warmup, self.ref_index, torch.minimum(self.ref_index + 1, self._clip_end()))
+        self.tracked_steps += (~in_warmup).long()
         self._update_state()
+        self._update_history()
 
         costs = {name: func(self, **params) for name, (func, params) in self.reward_funcs.items()}
         reward, per_term = reward_terms.aggregate(costs, self.reward_weights)
         for name, value in per_term.items():
             self.episode_sums[name] += value
-        self._accumulate_metrics()
+        self._accumulate_metrics(~in_warmup)
 
         reasons = self._terminations()
         terminated = torch.stack(list(reasons.values())).any(0)
@@ -218,9 +231,6 @@ class InteractionEnv:
         self.contact_force = contact[..., 1:]
         self.hand_contact_found = self.contact_found[:, self.scene.hand_contact_ids]
         self.finger_contact_found = self.contact_found[:, self.scene.finger_contact_ids]
-        self.link_acc = (self.link_vel - self.prev_link_vel) / self.dt
-        self.object_acc = (self.object_lin_vel - self.prev_object_vel) / self.dt
-        self.prev_link_vel, self.prev_object_vel = self.link_vel, self.object_lin_vel
 
         # surface samples in world: p R^T + o (row vectors)
         self.object_points_world = self.object_points @ self.object_rotmat.transpose(-1, -2) + self.object_pos[:, None]
@@ -228,12 +238,19 @@ class InteractionEnv:
         self.ref = self.reference_at(0)
         self.ref_object_points_world = self.object_points @ self.ref.object_rotmat.transpose(-1, -2) + \
             self.ref.object_pos[:, None]
-        self.w_d = reward_terms.interaction_weights(self.d, self.ref.d_hat)
+        self.w_d = termination.interaction_weights(self.d, self.ref.d_hat)
+
+    def _update_history(self) -> None:
+        """What accumulates over steps, once per env step (never on resets): finite-difference accelerations
+        and the frames a required hand contact has been missing."""
+        self.link_acc = (self.link_vel - self.prev_link_vel) / self.dt
+        self.object_acc = (self.object_lin_vel - self.prev_object_vel) / self.dt
+        self.prev_link_vel, self.prev_object_vel = self.link_vel.clone(), self.object_lin_vel.clone()
         need = self.ref.hand_contact & (self.warmup_left == 0)[:, None]
         distance = self.d.norm(dim=-1)
         near = torch.stack([distance[:, ids].amin(-1) for ids in self.scene.hand_link_ids], dim=-1)
-        kept = self.hand_contact_found | (near < self.cfg.terminations.contact_tolerance)
-        self.contact_loss_frames = torch.where(need & ~kept, self.contact_loss_frames + 1, 0)
+        self.contact_loss_frames = termination.contact_loss_count(
+            self.contact_loss_frames, need, self.hand_contact_found, near, self.cfg.terminations.contact_tolerance)
 
     def reference_at(self, k: int) -> ReferenceFrame:
         idx = torch.minimum(self.ref_index + k, self._clip_end()) if k else self.ref_index
@@ -247,27 +264,28 @@ class InteractionEnv:
         )
 
     def _terminations(self) -> dict[str, Tensor]:
-        t = self.cfg.terminations
-        return {
-            "link_deviation": term_terms.link_deviation(self, t.max_mean_link_error),
-            "root_too_low": term_terms.root_too_low(self, t.min_root_height),
-            "object_deviation": term_terms.object_deviation(self, t.max_mean_object_point_error),
-            "interaction_distance": term_terms.interaction_distance_deviation(
-                self, t.max_interaction_distance_error),
-            "contact_lost": term_terms.contact_lost(self, t.max_contact_loss_frames),
-        }
+        return term_terms.interaction_terminations(self, self.cfg.terminations)
 
     # ---- metrics ------------------------------------------------------------------------------------------------
-    def _accumulate_metrics(self) -> None:
+    def _accumulate_metrics(self, tracking: Tensor) -> None:
+        """E_h and E_o summed over the steps after the warmup (the imitated duration)."""
         body = self.scene.body_link_ids  # E_h excludes hand joints for OMOMO (InterMimic Sec. 4)
-        self.episode_error_h += (self.ref.link_pos[:, body] - self.link_pos[:, body]).norm(dim=-1).mean(-1)
-        self.episode_error_o += (self.object_points_world - self.ref_object_points_world).norm(dim=-1).mean(-1)
+        error_h = (self.ref.link_pos[:, body] - self.link_pos[:, body]).norm(dim=-1).mean(-1)
+        error_o = (self.object_points_world - self.ref_object_points_world).norm(dim=-1).mean(-1)
+        self.episode_error_h += torch.where(tracking, error_h, 0.0)
+        self.episode_error_o += torch.where(tracking, error_o, 0.0)
 
     def _episode_stats(self, done: Tensor, terminated: Tensor, reached_end: Tensor) -> dict[str, Tensor]:
-        """Per finished episode: InterMimic's success, duration (s), E_h and E_o (cm, averaged over the episode)."""
-        steps = self.episode_length[done].clamp(min=1).float()
+        """Per finished episode: InterMimic's success, duration (s, after the warmup), E_h and E_o (cm, averaged
+        over that duration). Success: the clip's end reached without termination, after tracking at least
+        `success_min_frames_fraction` of the clip (an episode started near the end is not a success)."""
+        steps = self.tracked_steps[done].clamp(min=1).float()
+        clip = self.clip_id[done]
+        clip_frames = (self.clip_end[clip] - self.clip_start[clip]).float()
+        covered = (self.ref_index[done] - self.start_frame[done]).float() >= \
+            self.cfg.success_min_frames_fraction * clip_frames
         return {
-            "success": (reached_end[done] & ~terminated[done]).float(),
+            "success": (reached_end[done] & ~terminated[done] & covered).float(),
             "duration_s": steps * self.dt,
             "E_h_cm": 100 * self.episode_error_h[done] / steps,
             "E_o_cm": 100 * self.episode_error_o[done] / steps,
@@ -310,6 +328,10 @@ class InteractionEnv:
             if states is None:
                 frames = self._random_frames(clip[others])
                 states = self._reference_states(frames)
+            else:  # seeded (reference) rows get a fresh RSI draw: seeds share no frozen noise
+                from_reference = states.isnan().any(-1)
+                if from_reference.any():
+                    states[from_reference] = self._reference_states(frames[from_reference])
             robot_state[others] = states[:, : robot_state.shape[1]]
             object_state[others] = states[:, robot_state.shape[1]:]
             frame[others] = frames
@@ -329,6 +351,8 @@ class InteractionEnv:
         if custom_ids.numel():
             self.warmup_left[env_ids[custom_ids]] = plan.hold[custom_ids]
         self.episode_length[env_ids] = 0
+        self.tracked_steps[env_ids] = 0
+        self.start_frame[env_ids] = frame
         self.contact_loss_frames[env_ids] = 0
         self.last_actions[env_ids] = 0.0
         for s in self.episode_sums.values():
@@ -347,10 +371,12 @@ class InteractionEnv:
         return self.clip_start[clip] + (fraction * span).long()
 
     def _reference_states(self, frames: Tensor) -> Tensor:
-        """Robot + object states of the IK reference at `frames`, with joint noise (RSI)."""
+        """Robot + object states of the IK reference at `frames`, with joint noise (RSI) on the actuated body
+        joints (noise on finger channels would break their mimic joints' couplings)."""
         qpos = self.ref_robot_qpos[frames].clone()
-        qpos[:, 7:] += self.cfg.init.joint_noise * torch.randn(qpos[:, 7:].shape, generator=self.generator,
-                                                                device=self.device)
+        noisy = self._rsi_noise_qpos
+        qpos[:, noisy] += self.cfg.init.joint_noise * torch.randn(len(frames), len(noisy), generator=self.generator,
+                                                                   device=self.device)
         qvel = self.ref_robot_qvel[frames]
         obj = torch.cat([self.ref_object_pos[frames], self.ref_object_quat[frames],
                          self.ref_object_lin_vel[frames],

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from robot_hoi.termination import Thresholds
+
 
 @dataclass
 class RewardTermCfg:
@@ -35,18 +37,8 @@ def _default_rewards() -> dict[str, RewardTermCfg | None]:
     }
 
 
-@dataclass
-class TerminationCfg:
-    """Early termination (supp. E.1) + interaction early termination (Sec. 3.2), thresholds as written."""
-
-    max_mean_link_error: float = 0.5        # m, joints on average further than this from their reference
-    min_root_height: float = 0.15           # m
-    max_mean_object_point_error: float = 0.5  # m, object points deviate on average
-    max_interaction_distance_error: float = 0.5  # m, weighted link-to-object distance vs the reference
-    max_contact_loss_frames: int = 10       # required body-object contact lost for more than this many frames
-    # A required hand contact also counts as kept while a hand link (wrist or fingertip) is within this distance
-    # of the object surface: the retargeted hands rest ~1 cm off the hull, and a grip is a few mm of squeeze.
-    contact_tolerance: float = 0.02
+# Early termination (supp. E.1) + interaction early termination (Sec. 3.2): one definition, shared with sim2sim.
+TerminationCfg = Thresholds
 
 
 @dataclass
@@ -56,7 +48,7 @@ class PsiCfg:
     enabled: bool = True
     buffer_size: int = 4096
     update_probability: float = 0.005   # sparse: chance per finished rollout to write into the buffer
-    return_threshold: float = 0.5       # admitted when the discounted return per step exceeds this
+    return_threshold: float = 0.0       # admitted above the running mean return by this many std deviations
     sample_probability: float = 0.5     # share of non-stand resets drawn from the buffer once it has states
 
 

@@ -1,9 +1,12 @@
 """Physical State Initialization (InterMimic Sec. 3.2, supp. E.2).
 
-A FIFO buffer of initial states: it starts with reference-derived states (the IK retarget, i.e. RSI) and admits
-simulated states whose discounted return over the following `horizon` steps, per step, exceeds a threshold.
-Candidates are taken sparsely: each env starts tracking a candidate with probability `update_probability` per
-step (the paper's 0.005 per rollout), so the buffer refreshes slowly and stays cheap.
+A FIFO buffer of initial states: it starts with reference frames (RSI: the env draws their state, with fresh
+noise, each time one is sampled; stored as NaN rows) spread evenly over every clip, and admits simulated states
+whose discounted return over the following `horizon` steps, per step, is above the running mean of such returns
+by `return_threshold` running standard deviations. A fixed threshold does not fit: the per-step reward scale
+depends on the reward formulation and on how far training is. Candidates are taken sparsely: each env starts
+tracking a candidate with probability `update_probability` per step (the paper's 0.005 per rollout), so the buffer
+refreshes slowly and stays cheap.
 """
 
 from __future__ import annotations
@@ -27,6 +30,8 @@ class PsiBuffer:
         self.size = 0
         self.head = 0
         self.admitted = 0
+        self.return_mean, self.return_var = 0.0, 0.0  # running statistics of candidate returns (per step)
+        self.candidates_seen = 0
         self._cand_state: Tensor | None = None
 
     def __len__(self) -> int:
@@ -50,8 +55,12 @@ class PsiBuffer:
         idx = torch.randint(self.size, (n,), generator=self.generator, device=self.device)
         return self.states[idx].clone(), self.frames[idx].clone()
 
-    def seed_from_reference(self, states: Tensor, frames: Tensor) -> None:
-        self.push(states[-self.cfg.buffer_size:], frames[-self.cfg.buffer_size:])
+    def seed_from_reference(self, frames: Tensor) -> None:
+        """Reference frames (all clips), evenly strided down to the buffer size; their states are NaN rows that
+        the env fills with a fresh reference-state draw when they are sampled."""
+        if len(frames) > self.cfg.buffer_size:
+            frames = frames[torch.linspace(0, len(frames) - 1, self.cfg.buffer_size, device=frames.device).long()]
+        self.push(torch.full((len(frames), self.states.shape[1]), float("nan"), device=self.device), frames)
 
     # ---- candidate tracking, called by the env every step ----------------------------------------------------------
     def _ensure(self, env) -> None:
@@ -73,7 +82,9 @@ class PsiBuffer:
         finished = active & (self._cand_steps >= self.horizon) & ~done
         if finished.any():
             norm = (1 - self.gamma ** self.horizon) / (1 - self.gamma)
-            good = finished & (self._cand_return / norm > self.cfg.return_threshold)
+            per_step = self._cand_return[finished] / norm
+            good = finished.clone()
+            good[finished] = self.admit(per_step)
             self.push(self._cand_state[good], self._cand_frame[good])
             self.admitted += int(good.sum())
         self._cand_active &= ~(finished | done)
@@ -85,6 +96,24 @@ class PsiBuffer:
             self._cand_return[start] = 0.0
             self._cand_steps[start] = 0
             self._cand_active |= start
+
+    def admit(self, per_step_returns: Tensor) -> Tensor:
+        """Which candidates enter: above the running mean by return_threshold standard deviations. The statistics
+        are updated with these returns afterwards (Welford / Chan merge); the first batch only sets them."""
+        n = per_step_returns.numel()
+        std = self.return_var ** 0.5
+        decide = self.candidates_seen > 0
+        keep = per_step_returns > self.return_mean + self.cfg.return_threshold * std if decide else \
+            torch.zeros(n, dtype=torch.bool, device=self.device)
+        mean_b = float(per_step_returns.mean())
+        var_b = float(per_step_returns.var(unbiased=False)) if n > 1 else 0.0
+        total = self.candidates_seen + n
+        delta = mean_b - self.return_mean
+        self.return_var = (self.return_var * self.candidates_seen + var_b * n
+                           + delta * delta * self.candidates_seen * n / total) / total
+        self.return_mean += delta * n / total
+        self.candidates_seen = total
+        return keep
 
     def on_reset(self, env_ids: Tensor) -> None:
         if self._cand_state is not None:

@@ -7,6 +7,7 @@ import numpy as np
 import torch
 
 from robot_hoi.embodiment.collision import world_bits
+from robot_hoi.termination import hand_link_groups
 from robot_hoi.sim import make_backend
 from robot_hoi.sim.scene import OBJECT_BODY, OBJECT_JOINT, SceneLayout, add_object, add_sensors
 
@@ -36,9 +37,7 @@ class InteractionScene:
         self.body_link_ids = [i for i, n in enumerate(self.layout.link_names)
                               if not any(m in n for m in HAND_LINK_MARKERS)]
         # wrist + fingertip links of the left and right hand (for contact tolerance)
-        self.hand_link_ids = [[i for i, n in enumerate(self.layout.link_names)
-                               if n.startswith(prefix) or n == wrist]
-                              for prefix, wrist in (("L_", "left_wrist_yaw_link"), ("R_", "right_wrist_yaw_link"))]
+        self.hand_link_ids = hand_link_groups(self.layout.link_names)
 
     def _resolve_layout(self, contact_names: list[str]) -> SceneLayout:
         m = self.model

@@ -16,13 +16,6 @@ from robot_hoi.utils.torch_rot import quat_diff_angle
 _EPS = 1e-4
 
 
-def interaction_weights(d: Tensor, d_hat: Tensor) -> Tensor:
-    """w_d (Eq. 2): 0.5 * normalised 1/|d|^2 of the simulation + 0.5 * the same of the reference. (N, L)."""
-    inv = 1.0 / d.square().sum(-1).clamp(min=_EPS)
-    inv_hat = 1.0 / d_hat.square().sum(-1).clamp(min=_EPS)
-    return 0.5 * inv / inv.sum(-1, keepdim=True) + 0.5 * inv_hat / inv_hat.sum(-1, keepdim=True)
-
-
 def link_position_cost(env) -> Tensor:
     """E_p^h = <|p_hat - p|, w_d>."""
     return (env.w_d * (env.ref.link_pos - env.link_pos).norm(dim=-1)).sum(-1)
