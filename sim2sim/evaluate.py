@@ -262,7 +262,9 @@ def _plots(report, results, entries, perturbations, plotting) -> list[tuple[str,
 
 
 def _videos(results, entries, out: Path, count: int, say) -> tuple[list[dict], dict]:
-    from sim2sim.video import VideoRequest, render_videos
+    from sim2sim.layout import WorldLayout
+    from sim2sim.scene import load_model
+    from sim2sim.video import VideoRequest, reference_qpos, render_videos
 
     if count <= 0:
         return [], {"backend": None, "message": "videos not requested (--videos 0)"}
@@ -278,13 +280,18 @@ def _videos(results, entries, out: Path, count: int, say) -> tuple[list[dict], d
     chosen += [(r, "worst") for r in rest]
     chosen = chosen[:count]
     targets = {(e.label, t.name): t for e in entries for t in e.targets}
+    contracts = {e.label: e.contract for e in entries}
     requests, videos = [], []
     for r, why in chosen:
         target = targets[(r["policy"], r["clip"])]
         file = f"videos/{r['policy']}_{r['clip']}_{r['perturbation']}_ep{r['episode']}.mp4".replace(":", "-")
         title = (f"{r['policy']} on {r['clip']}, {r['perturbation']}, episode {r['episode']} ({why}): "
                  f"{r['outcome']}, {r['duration_s']:.1f} s")
-        requests.append(VideoRequest(Path(file).name, title, target.scene, r["trace"]["qpos"], target.motion.fps))
+        contract = contracts[r["policy"]]
+        layout = WorldLayout.resolve(load_model(target.scene), contract)
+        ghost = reference_qpos(r["trace"], target.motion, layout, contract.warmup_frames)
+        requests.append(VideoRequest(Path(file).name, title + " (ghost: the reference)", target.scene,
+                                     r["trace"]["qpos"], target.motion.fps, ghost))
         videos.append({"file": file, "title": title})
     say(f"sim2sim: rendering {len(requests)} video(s)")
     render = render_videos(requests, out / "videos")

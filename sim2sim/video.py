@@ -33,41 +33,45 @@ class VideoRequest:
     scene: bytes  # MJB of the episode's model
     qpos: np.ndarray  # (N, nq) states, one per control tick
     fps: float
+    ghost_qpos: np.ndarray | None = None  # (N, nq) the reference at the same ticks, drawn as a translucent ghost
+
+
+def reference_qpos(trace: dict, motion, layout, warmup_frames: int) -> np.ndarray:
+    """(N, nq) per recorded tick: the recorded state with robot and object moved to the reference frame the
+    policy tracks then (frame 0 until the policy has run its warmup, as the runtime's clock holds it)."""
+    from deploy.safety import Phase
+
+    qpos = np.array(trace["qpos"], dtype=np.float64)
+    times = np.asarray(trace["time_s"], dtype=np.float64)
+    running = np.flatnonzero(np.asarray(trace["phase"]) == int(Phase.POLICY))
+    start = times[running[0]] if len(running) else np.inf
+    ticks = np.where(times >= start, np.round((times - start) * motion.fps), 0)
+    frames = np.clip(ticks.astype(int) - warmup_frames, 0, motion.num_frames - 1)
+    qpos[:, 0:3] = motion.root_pos[frames]
+    qpos[:, 3:7] = motion.root_quat_wxyz[frames]
+    qpos[:, layout.body_qpos] = motion.joint_pos[frames][:, :len(layout.body_qpos)]
+    qpos[:, layout.hand_qpos] = motion.joint_pos[frames][:, len(layout.body_qpos):][:, :len(layout.hand_qpos)]
+    qpos[:, layout.object_qpos:layout.object_qpos + 3] = motion.object_pos[frames]
+    qpos[:, layout.object_qpos + 3:layout.object_qpos + 7] = motion.object_quat_wxyz[frames]
+    return qpos
 
 
 def _render(backend: str, requests: list[VideoRequest], out_dir: str, queue) -> None:
     os.environ["MUJOCO_GL"] = backend
     try:
-        import imageio.v2 as imageio
-        import mujoco
-
-        from robot_hoi.utils.atomic import atomic_path
+        from robot_hoi.sim.video import StateRenderer, write_mp4
         from sim2sim.scene import load_model
 
         written = []
         for req in requests:
             model = load_model(req.scene)
-            model.vis.global_.offwidth = max(model.vis.global_.offwidth, WIDTH)
-            model.vis.global_.offheight = max(model.vis.global_.offheight, HEIGHT)
             model.vis.quality.shadowsize = 0  # shadows and reflections cost 2-5x on a software renderer
             model.mat_reflectance[:] = 0.0
             stride = max(1, int(round(req.fps / VIDEO_FPS)))
-            data = mujoco.MjData(model)
-            camera = mujoco.MjvCamera()
-            camera.type = mujoco.mjtCamera.mjCAMERA_FREE
-            camera.distance, camera.azimuth, camera.elevation = 3.2, 135.0, -18.0
-            with mujoco.Renderer(model, HEIGHT, WIDTH) as renderer:
-                frames = []
-                for q in req.qpos[::stride]:
-                    data.qpos[:] = q
-                    mujoco.mj_forward(model, data)
-                    camera.lookat[:] = (data.qpos[0], data.qpos[1], 0.6)
-                    renderer.update_scene(data, camera=camera)
-                    frames.append(renderer.render().copy())
-            path = Path(out_dir) / req.file
-            with atomic_path(path) as tmp:
-                imageio.mimwrite(tmp, frames, fps=req.fps / stride, codec="libx264", quality=7, macro_block_size=16)
-            written.append(str(path))
+            ghosts = req.ghost_qpos[::stride] if req.ghost_qpos is not None else [None] * len(req.qpos[::stride])
+            with StateRenderer(model, (WIDTH, HEIGHT), distance=3.2) as renderer:
+                frames = [renderer.render(q, ghost_qpos=g) for q, g in zip(req.qpos[::stride], ghosts, strict=True)]
+            written.append(str(write_mp4(Path(out_dir) / req.file, frames, req.fps / stride)))
         queue.put(("ok", written))
     except Exception as exc:  # reported to the parent, which tries the next backend
         queue.put(("error", f"{type(exc).__name__}: {exc}"))

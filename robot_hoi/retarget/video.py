@@ -1,5 +1,6 @@
 """An mp4 of a retargeted motion: MuJoCo's offscreen renderer when an OpenGL backend works, else a matplotlib
-3D stick figure. Targets are drawn as small red spheres (dots in the fallback), the object as its mesh.
+3D stick figure. The reference (the scaled human's targets) is drawn as a translucent ghost skeleton in the tint
+of every reference ghost (robot_hoi.sim.video; red dots in the fallback), the object as its mesh.
 
 MuJoCo picks its GL backend from MUJOCO_GL when it is first imported, so `choose_gl_backend` must run before
 anything imports mujoco: it tries EGL, then OSMesa, each in a throw-away subprocess.
@@ -64,46 +65,43 @@ def _render_model(cfg, object_asset, meshes: bool):
     return spec.compile()
 
 
-def _add_marker(scene, pos, rgba, radius=0.012) -> None:
+def target_bones(model, link_names) -> list[tuple[int, int]]:
+    """(child, parent) pairs of targets whose links are nearest relatives in the robot's body tree."""
     import mujoco
 
-    if scene.ngeom >= scene.maxgeom:
-        return
-    mujoco.mjv_initGeom(scene.geoms[scene.ngeom], mujoco.mjtGeom.mjGEOM_SPHERE, np.array([radius, 0, 0]),
-                        np.asarray(pos, dtype=np.float64), np.eye(3).ravel(), np.asarray(rgba, dtype=np.float32))
-    scene.ngeom += 1
+    def body_of(name: str) -> int:
+        body = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, name)
+        return body if body >= 0 else int(model.site_bodyid[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, name)])
+
+    bodies = [body_of(n) for n in link_names]
+    index = {b: i for i, b in enumerate(bodies)}
+    bones = []
+    for i, body in enumerate(bodies):
+        parent = body if index[body] != i else int(model.body_parentid[body])  # a site: the link it sits on
+        while parent > 0 and parent not in index:
+            parent = int(model.body_parentid[parent])
+        if parent in index:
+            bones.append((i, index[parent]))
+    return bones
 
 
 def render_mujoco(
     motion, cfg, path: Path, object_asset=None, size=(640, 480), stride: int = 1, pretty: bool = False
 ) -> None:
     """pretty: Unitree meshes, shadows and reflections (~0.4 s a frame with software GL, vs ~0.04 s)."""
-    import imageio.v2 as imageio
-    import mujoco
+    from robot_hoi.sim.video import StateRenderer, add_ghost_skeleton, write_mp4
 
     model = _render_model(cfg, object_asset, meshes=pretty)
     if model.nq != motion.qpos.shape[1]:
         raise RuntimeError(f"render model has nq {model.nq}, motion has {motion.qpos.shape[1]}")
-    data = mujoco.MjData(model)
-    cam = mujoco.MjvCamera()
-    cam.type = mujoco.mjtCamera.mjCAMERA_FREE
-    cam.distance, cam.azimuth, cam.elevation = 2.4, 135.0, -15.0
-    with mujoco.Renderer(model, height=size[1], width=size[0]) as renderer, atomic_path(path) as tmp:
-        with imageio.get_writer(tmp, fps=motion.fps / stride, codec="libx264", macro_block_size=8,
-                                format="FFMPEG") as writer:
-            for t in range(0, motion.num_frames, stride):
-                data.qpos[:] = motion.qpos[t]
-                if model.nmocap:
-                    data.mocap_pos[0] = motion.object_pos[t]
-                    data.mocap_quat[0] = motion.object_quat_wxyz[t]
-                mujoco.mj_forward(model, data)
-                cam.lookat[:] = [motion.qpos[t, 0], motion.qpos[t, 1], 0.6]
-                renderer.update_scene(data, camera=cam)
-                renderer.scene.flags[mujoco.mjtRndFlag.mjRND_SHADOW] = pretty
-                renderer.scene.flags[mujoco.mjtRndFlag.mjRND_REFLECTION] = pretty
-                for p in motion.target_pos[t]:
-                    _add_marker(renderer.scene, p, (1.0, 0.1, 0.1, 0.8))
-                writer.append_data(renderer.render())
+    bones = target_bones(model, motion.link_names)
+    mocap = model.nmocap > 0
+    with StateRenderer(model, size, distance=2.4, elevation=-15.0, fancy=pretty) as renderer:
+        frames = (renderer.render(motion.qpos[t], mocap_pos=motion.object_pos[t] if mocap else None,
+                                  mocap_quat=motion.object_quat_wxyz[t] if mocap else None,
+                                  decorate=lambda scene, t=t: add_ghost_skeleton(scene, motion.target_pos[t], bones))
+                  for t in range(0, motion.num_frames, stride))
+        write_mp4(path, frames, motion.fps / stride)
 
 
 def render_matplotlib(motion, model, path: Path, object_points_local=None, size=(640, 480), stride: int = 1) -> None:
