@@ -37,6 +37,9 @@ def register(subparsers) -> None:
                    help="PPO settings: paper = InterMimic Table C (tuned for 8192 GPU envs), fast = CPU-sized")
     p.add_argument("--config", default=None, help="a training YAML instead of the preset")
     p.add_argument("--task-config", default=str(TASK_CONFIG), help="environment YAML")
+    p.add_argument("--rewards", default=None, metavar="SET",
+                   help="reward formulation: a configs/tasks/rewards/ name (anchor_additive, intermimic_code, "
+                        "intermimic_paper) or YAML path; default: the task config's")
     p.add_argument("--set", dest="overrides", action="append", default=[],
                    help="override, e.g. --set env.num_envs=128 --set ppo.actor_lr=1e-4 (repeatable)")
     p.add_argument("--resume", action="store_true", help="continue each group from its latest checkpoint")
@@ -115,9 +118,9 @@ def run(args: argparse.Namespace) -> int:
     from robot_hoi.rl.config import load_train_config
     from robot_hoi.rl.teacher_job import PREEMPT_HOOK_ENV, TeacherJob, format_line, print_summary
     from robot_hoi.tasks.interaction import factory
-    from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg
+    from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg, apply_reward_set
     from robot_hoi.utils.atomic import atomic_write_text
-    from robot_hoi.utils.config import load_yaml_dataclass
+    from robot_hoi.utils.config import apply_overrides, load_yaml_dataclass
 
     if args.eval_episodes < 1:
         raise UserError(f"--eval-episodes must be at least 1, got {args.eval_episodes}")
@@ -125,7 +128,10 @@ def run(args: argparse.Namespace) -> int:
     env_overrides = [o[len("env."):] for o in args.overrides if o.startswith("env.")]
     train_overrides = [o for o in args.overrides if not o.startswith("env.")]
     embodiment = load_embodiment(args.embodiment)
-    env_cfg = load_yaml_dataclass(InteractionEnvCfg, args.task_config, env_overrides)
+    env_cfg = load_yaml_dataclass(InteractionEnvCfg, args.task_config)
+    if args.rewards:
+        apply_reward_set(env_cfg, args.rewards)
+    env_cfg = apply_overrides(env_cfg, env_overrides, "--set")
     env_cfg.embodiment = embodiment.name
     train_cfg = load_train_config(args.config or PRESETS[args.preset], train_overrides)
     budget = parse_budget(args.budget)

@@ -89,6 +89,11 @@ class InteractionEnv:
         self.reward_weights = {n: t.weight for n, t in cfg.rewards.items() if t is not None}
         self.reward_funcs = {n: (reward_terms.REWARD_TERMS[t.func], t.params)
                              for n, t in cfg.rewards.items() if t is not None}
+        self.reward_scales = {n: t.scale for n, t in cfg.rewards.items() if t is not None}
+        if cfg.reward_mode not in ("product", "sum"):
+            raise UserError(f"env.reward_mode must be 'product' or 'sum', not {cfg.reward_mode!r}")
+        self.feet_link_mask = torch.zeros(layout.num_links, device=self.device)
+        self.feet_link_mask[scene.feet_link_ids] = 1.0
         # an episode from the stand must be able to cover the longest clip plus its warmup
         longest = int((self.clip_end - self.clip_start).max()) + 1
         self.max_episode_length = max(cfg.max_episode_frames, longest + cfg.warmup_frames + 1)
@@ -168,7 +173,7 @@ class InteractionEnv:
         self._update_history()
 
         costs = {name: func(self, **params) for name, (func, params) in self.reward_funcs.items()}
-        reward, per_term = reward_terms.aggregate(costs, self.reward_weights)
+        reward, per_term = reward_terms.aggregate(costs, self.reward_weights, self.cfg.reward_mode, self.reward_scales)
         for name, value in per_term.items():
             self.episode_sums[name] += value
         self._accumulate_metrics(~in_warmup)
@@ -236,6 +241,7 @@ class InteractionEnv:
         self.object_points_world = self.object_points @ self.object_rotmat.transpose(-1, -2) + self.object_pos[:, None]
         self.d = nearest_surface_vectors(self.link_pos, self.object_points_world)
         self.ref = self.reference_at(0)
+        self.ref_heading_matrix = quat_to_matrix(yaw_quat(self.ref.root_quat_wxyz))
         self.ref_object_points_world = self.object_points @ self.ref.object_rotmat.transpose(-1, -2) + \
             self.ref.object_pos[:, None]
         self.w_d = termination.interaction_weights(self.d, self.ref.d_hat)

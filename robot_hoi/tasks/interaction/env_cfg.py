@@ -15,7 +15,8 @@ from robot_hoi.termination import Thresholds
 class RewardTermCfg:
     func: str                      # name in mdp.rewards.REWARD_TERMS
     weight: float                  # lambda of exp(-lambda * E)
-    params: dict[str, float] = field(default_factory=dict)
+    params: dict[str, float | bool] = field(default_factory=dict)
+    scale: float = 1.0             # the term's share in the "sum" aggregation (ignored by "product")
 
 
 def _default_rewards() -> dict[str, RewardTermCfg | None]:
@@ -84,8 +85,37 @@ class InteractionEnvCfg:
     # being stepped to (the policy learns corrections; the runtime reads them from the motion sidecar);
     # "default": offset = the default pose (InterMimic's absolute targets).
     action_offset: str = "reference"
+    reward_mode: str = "product"            # "product": exp(-sum lambda E) (InterMimic) | "sum": weighted sum of exps
     rewards: dict[str, RewardTermCfg | None] = field(default_factory=_default_rewards)
     terminations: TerminationCfg = field(default_factory=TerminationCfg)
     init: InitCfg = field(default_factory=InitCfg)
     psi: PsiCfg = field(default_factory=PsiCfg)
     success_min_frames_fraction: float = 0.95  # success = tracked to (almost) the end without termination
+
+
+def reward_set_names() -> list[str]:
+    from robot_hoi.paths import CONFIGS_DIR
+
+    return sorted(p.stem for p in (CONFIGS_DIR / "tasks" / "rewards").glob("*.yaml"))
+
+
+def apply_reward_set(cfg: InteractionEnvCfg, name: str) -> None:
+    """Replace the reward terms and aggregation of `cfg` with configs/tasks/rewards/<name>.yaml (or a YAML path)."""
+    from pathlib import Path
+
+    import yaml
+
+    from robot_hoi.errors import UserError
+    from robot_hoi.paths import CONFIGS_DIR
+    from robot_hoi.utils.config import load_dataclass
+
+    path = Path(name) if name.endswith((".yaml", ".yml")) else CONFIGS_DIR / "tasks" / "rewards" / f"{name}.yaml"
+    if not path.is_file():
+        raise UserError(f"{path}: no such reward set (choose from {', '.join(reward_set_names())} or a YAML path)")
+    data = yaml.safe_load(path.read_text()) or {}
+    if set(data) - {"reward_mode", "rewards"} or "rewards" not in data:
+        raise UserError(f"{path}: a reward set has the keys reward_mode and rewards only")
+    cfg.reward_mode = data.get("reward_mode", "product")
+    cfg.rewards = {k: None if v is None else load_dataclass(RewardTermCfg, v, f"{path} rewards.{k}")
+                   for k, v in data["rewards"].items()}
+

@@ -38,6 +38,8 @@ class InteractionScene:
                               if not any(m in n for m in HAND_LINK_MARKERS)]
         # wrist + fingertip links of the left and right hand (for contact tolerance)
         self.hand_link_ids = hand_link_groups(self.layout.link_names)
+        self.hand_link_flat_ids = self.hand_link_ids[0] + self.hand_link_ids[1]
+        self.feet_link_ids = [i for i, n in enumerate(self.layout.link_names) if "ankle" in n or "toe" in n]
 
     def _resolve_layout(self, contact_names: list[str]) -> SceneLayout:
         m = self.model

@@ -1,9 +1,15 @@
-"""Reward costs (InterMimic Sec. 3.2, supp. D). Each returns a cost E >= 0 per env; the env aggregates
-R = exp(-sum_i lambda_i * E_i) and logs exp(-lambda_i * E_i) of every term on its own.
+"""Reward costs (InterMimic Sec. 3.2, supp. D, and an anchor-relative set). Each returns a cost E >= 0 per env.
+
+Two aggregations (env.reward_mode):
+- "product" (InterMimic): R = exp(-sum_i lambda_i * E_i); one bad term zeroes the whole reward.
+- "sum" (BeyondMimic-style): R = sum_i s_i exp(-lambda_i * E_i) / sum_i s_i, s_i = the term's `scale`; every term
+  that is right pays on its own, so a policy still learns to balance while its hands are off.
+The env logs exp(-lambda_i * E_i) of every term on its own.
 
 Robot version (supp. F): positions and rotations of the robot links mapped to SMPL-X bodies, w_d from the
 link-to-object distances of simulation and reference (Eq. 2). Rotation and position costs are w-weighted means
-over links so the lambdas stay meaningful for any link count.
+over links so the lambdas stay meaningful for any link count. `squared=True` uses squared errors (InterMimic's
+public code); with lambda 10, a uniform 10 cm error then scores exp(-0.1) = 0.90 instead of exp(-3) = 0.05.
 """
 
 from __future__ import annotations
@@ -13,12 +19,20 @@ from torch import Tensor
 
 from robot_hoi.utils.torch_rot import quat_diff_angle
 
-_EPS = 1e-4
 
 
-def link_position_cost(env) -> Tensor:
-    """E_p^h = <|p_hat - p|, w_d>."""
-    return (env.w_d * (env.ref.link_pos - env.link_pos).norm(dim=-1)).sum(-1)
+def _error(x: Tensor, squared: bool) -> Tensor:
+    return x.square() if squared else x
+
+
+def link_position_cost(env, squared: bool = False, feet_weight: float = 0.0) -> Tensor:
+    """E_p^h = <|p_hat - p|, w_d>. `feet_weight` adds that weight to each foot link before renormalising: w_d
+    puts almost nothing on the feet while the hands are near the object, so nothing would teach the stance."""
+    w = env.w_d
+    if feet_weight:
+        w = w + feet_weight * env.feet_link_mask
+        w = w / w.sum(-1, keepdim=True)
+    return (w * _error((env.ref.link_pos - env.link_pos).norm(dim=-1), squared)).sum(-1)
 
 
 def link_rotation_cost(env) -> Tensor:
@@ -28,17 +42,66 @@ def link_rotation_cost(env) -> Tensor:
     return (weight * angle).sum(-1) / weight.sum(-1)
 
 
-def interaction_geometry_cost(env) -> Tensor:
+def interaction_geometry_cost(env, squared: bool = False) -> Tensor:
     """E_d = <|d_hat - d|, w_d> (interaction graph between links and the object surface)."""
-    return (env.w_d * (env.ref.d_hat - env.d).norm(dim=-1)).sum(-1)
+    return (env.w_d * _error((env.ref.d_hat - env.d).norm(dim=-1), squared)).sum(-1)
 
 
-def object_position_cost(env) -> Tensor:
-    return (env.ref.object_pos - env.object_pos).norm(dim=-1)
+def object_position_cost(env, squared: bool = False) -> Tensor:
+    return _error((env.ref.object_pos - env.object_pos).norm(dim=-1), squared)
 
 
-def object_rotation_cost(env) -> Tensor:
-    return quat_diff_angle(env.ref.object_quat_wxyz, env.object_quat)
+def object_rotation_cost(env, squared: bool = False) -> Tensor:
+    return _error(quat_diff_angle(env.ref.object_quat_wxyz, env.object_quat), squared)
+
+
+# ---- anchor-relative terms (mean squared errors; the "sum" aggregation) -------------------------------------------
+def _in_heading(rotmat: Tensor, vec: Tensor) -> Tensor:
+    """World vectors (N, L, 3) into the heading frames (N, 3, 3): row form v^T H."""
+    return vec @ rotmat
+
+
+def root_position_cost(env) -> Tensor:
+    """|root - root_hat|^2 (world): where the robot stands and how high its pelvis is."""
+    return (env.ref.root_pos - env.root_pos).square().sum(-1)
+
+
+def root_orientation_cost(env) -> Tensor:
+    """angle(root, root_hat)^2: the pelvis' full orientation (lean and heading)."""
+    return quat_diff_angle(env.ref.root_quat_wxyz, env.root_quat).square()
+
+
+def body_position_cost(env) -> Tensor:
+    """Mean over the body links (no hands) of the squared error of their positions relative to the pelvis, each
+    side in its own heading frame: the body's shape, independent of where the robot stands (BeyondMimic)."""
+    ids = env.scene.body_link_ids
+    sim = _in_heading(env.heading_matrix, env.link_pos[:, ids] - env.root_pos[:, None])
+    ref = _in_heading(env.ref_heading_matrix, env.ref.link_pos[:, ids] - env.ref.root_pos[:, None])
+    return (sim - ref).square().sum(-1).mean(-1)
+
+
+def body_rotation_cost(env) -> Tensor:
+    """Mean over the body links of angle(link, link_hat)^2 (world)."""
+    ids = env.scene.body_link_ids
+    return quat_diff_angle(env.ref.link_quat_wxyz[:, ids], env.link_quat[:, ids]).square().mean(-1)
+
+
+def feet_position_cost(env) -> Tensor:
+    """Mean squared world error of the foot links: planted feet stay where the reference plants them."""
+    ids = env.scene.feet_link_ids
+    return (env.ref.link_pos[:, ids] - env.link_pos[:, ids]).square().sum(-1).mean(-1)
+
+
+def hand_position_cost(env) -> Tensor:
+    """Mean squared world error of the hand links (wrists and fingertips): where the object is held."""
+    ids = env.scene.hand_link_flat_ids
+    return (env.ref.link_pos[:, ids] - env.link_pos[:, ids]).square().sum(-1).mean(-1)
+
+
+def joint_position_cost(env) -> Tensor:
+    """Mean squared error of the body joints to the reference's (the retarget's posture)."""
+    ids = env.body_actuator_ids
+    return (env.ref.joint_pos[:, ids] - env.joint_pos[:, ids]).square().mean(-1)
 
 
 def link_acceleration_cost(env) -> Tensor:
@@ -77,17 +140,22 @@ REWARD_TERMS = {
     for f in (
         link_position_cost, link_rotation_cost, interaction_geometry_cost, object_position_cost,
         object_rotation_cost, link_acceleration_cost, object_acceleration_cost, contact_force_cost,
-        contact_promotion_cost, contact_penalty_cost, hand_contact_cost,
+        contact_promotion_cost, contact_penalty_cost, hand_contact_cost, root_position_cost, root_orientation_cost,
+        body_position_cost, body_rotation_cost, feet_position_cost, hand_position_cost, joint_position_cost,
     )
 }
 
 
-def aggregate(costs: dict[str, Tensor], weights: dict[str, float]) -> tuple[Tensor, dict[str, Tensor]]:
-    """Multiplicative exp aggregation; returns the total reward and each term's exp(-lambda E)."""
-    exponent = torch.zeros_like(next(iter(costs.values())))
-    per_term = {}
-    for name, cost in costs.items():
-        scaled = weights[name] * cost
-        exponent = exponent + scaled
-        per_term[name] = torch.exp(-scaled)
-    return torch.exp(-exponent), per_term
+def aggregate(costs: dict[str, Tensor], weights: dict[str, float], mode: str = "product",
+              scales: dict[str, float] | None = None) -> tuple[Tensor, dict[str, Tensor]]:
+    """The total reward and each term's exp(-lambda E): "product" exp(-sum lambda E) or "sum" (normalised by the
+    scales' total, so R stays in [0, 1] either way)."""
+    per_term = {name: torch.exp(-weights[name] * cost) for name, cost in costs.items()}
+    if mode == "product":
+        exponent = sum(weights[name] * cost for name, cost in costs.items())
+        return torch.exp(-exponent), per_term
+    if mode == "sum":
+        scales = scales or {}
+        total = sum(scales.get(name, 1.0) for name in costs)
+        return sum(scales.get(name, 1.0) * value for name, value in per_term.items()) / total, per_term
+    raise ValueError(f"reward mode must be 'product' or 'sum', not {mode!r}")
