@@ -62,12 +62,17 @@ def register(subparsers) -> None:
     p.add_argument("--tracker-rate", type=float, default=120.0, help="simulated mocap rate in Hz (default 120)")
     p.add_argument("--min-success", type=float, default=None, metavar="RATE",
                    help="exit 1 when the first policy's nominal success rate is below RATE (a CI gate)")
+    p.add_argument("--ready-success", type=float, default=0.8, metavar="RATE",
+                   help="verdict: nominal success rate a ready policy reaches on every clip")
+    p.add_argument("--ready-e-h", type=float, default=10.0, metavar="CM",
+                   help="verdict: largest nominal E_h (cm, body links vs reference) of a ready policy")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
     p.set_defaults(func=handler)
 
 
 def handler(args: argparse.Namespace) -> int:
     from sim2sim.evaluate import Sim2SimOptions, evaluate
+    from sim2sim.verdict import ReadyThresholds
     from sim2sim.report import fmt_rtf
 
     options = Sim2SimOptions(
@@ -76,9 +81,14 @@ def handler(args: argparse.Namespace) -> int:
         workers=args.workers, seconds=args.seconds, hand_transport=args.hand_bus, hand_link=args.hand_link,
         embodiment=args.embodiment, videos=args.videos, seed=args.seed, self_collision=not args.no_self_collision,
         tracker_rate_hz=args.tracker_rate, quiet=args.quiet, argv=sys.argv[1:], clip_options=clip_options(args),
+        ready=ReadyThresholds(min_success=args.ready_success, max_e_h_cm=args.ready_e_h),
     )
     report, paths = evaluate(options)
     main = report["policies"][0]["label"]
+    from sim2sim.verdict import verdict_lines
+
+    for line in verdict_lines(report["verdict"]) if report.get("verdict") else []:
+        print(line)
     print(f"sim2sim report: {paths['html']}")
     print(f"  metrics {paths['metrics']}, summary {paths['summary']}, {len(report['videos'])} video(s)")
     for cell in report["cells"]:

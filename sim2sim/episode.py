@@ -58,13 +58,17 @@ class EpisodeJob:
 class MemoryRecorder(TickRecorder):
     """deploy's tick recorder keeping the few per-tick fields the report needs, in memory."""
 
-    def __init__(self):
+    def __init__(self, world=None):
         super().__init__(None)
         self.rows: list[dict] = []
+        self.world = world
+        self.touched_object = False  # a hand touched the object at some tick (E_o means little otherwise)
 
     def record(self, row) -> None:
         self.ticks += 1
         self.rows.append({k: np.asarray(row[k]) for k in KEEP_ROWS})
+        if self.world is not None and not self.touched_object:
+            self.touched_object = bool(self.world.hand_contact().any())
 
 
 _POLICIES: dict[str, OnnxPolicy] = {}
@@ -116,7 +120,7 @@ def run_episode(job: EpisodeJob) -> dict:
                                    rate_hz=job.hand_rate_hz)
     try:
         body.connect()
-        recorder = MemoryRecorder()
+        recorder = MemoryRecorder(world)
         safety = SafetyConfig(**SIM2SIM_SAFETY)
         runtime = Runtime(contract, MonitoredPolicy(policy, monitor), ObservationBuilder(contract, motion), body,
                           tracker, hands.hands, clock=clock, safety=safety, operator=monitor,
@@ -133,9 +137,33 @@ def run_episode(job: EpisodeJob) -> dict:
                    time.perf_counter() - wall0, time.process_time() - cpu0)
 
 
-def _outcome(monitor: EpisodeMonitor, summary: dict) -> tuple[bool, str]:
+FALL_TILT_DEG = 60.0  # the pelvis leaning further than this from upright at the end: the robot is down
+FALL_ROOT_HEIGHT_M = 0.2
+
+
+def fell(qpos: np.ndarray) -> str | None:
+    """'fell: ...' when the robot lies on the floor in state `qpos` (free base first), else None. Height alone
+    misreads a deep squat, so tilt counts too."""
+    w, x, y, z = qpos[3:7]
+    up_z = 1.0 - 2.0 * (x * x + y * y)  # world z of the pelvis' z axis
+    tilt = float(np.degrees(np.arccos(np.clip(up_z, -1.0, 1.0))))
+    if tilt > FALL_TILT_DEG or qpos[2] < FALL_ROOT_HEIGHT_M:
+        return f"fell: pelvis at {qpos[2]:.2f} m, tilted {tilt:.0f} deg at the end"
+    return None
+
+
+def _pushes_before_end(pushes: list, monitor: EpisodeMonitor, fps: float) -> int:
+    """Pushes that landed while the episode counted (the world runs on through DAMP after it ended)."""
+    if monitor.policy_started_at is None:
+        return 0
+    end = monitor.policy_started_at + (len(monitor.ticks) + 1) / fps
+    return sum(t <= end for t, _ in pushes)
+
+
+def _outcome(monitor: EpisodeMonitor, summary: dict, world=None) -> tuple[bool, str]:
     if monitor.terminations:
-        return False, "terminated: " + ", ".join(monitor.terminations)
+        down = fell(world.data.qpos) if world is not None else None
+        return False, "terminated: " + ", ".join(monitor.terminations) + (f" ({down})" if down else "")
     if summary["faults"]:
         return False, "runtime fault: " + summary["faults"][0]
     if monitor.policy_started_at is None:
@@ -149,7 +177,7 @@ def _result(job, contract, world, clock, monitor, recorder, summary, run_time, w
     run_wall, run_cpu = run_time
     target = job.target
     motion = target.motion
-    success, outcome = _outcome(monitor, summary)
+    success, outcome = _outcome(monitor, summary, world)
     frames = np.asarray(monitor.frames, dtype=int)
     link_pos = np.asarray(monitor.link_pos).reshape(-1, len(contract.link_names), 3)
     link_names = list(contract.link_names)
@@ -197,6 +225,9 @@ def _result(job, contract, world, clock, monitor, recorder, summary, run_time, w
             "torque_saturated_fraction": monitor.policy_torque_saturation(),
         },
         "pushes": world.pushes,
+        "pushes_in_episode": _pushes_before_end(world.pushes, monitor, motion.fps),
+        "object_touched": recorder.touched_object,
+        "fell": fell(world.data.qpos) is not None,
     }
     if job.keep_traces:
         result["trace"] = {

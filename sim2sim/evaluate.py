@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from robot_hoi.errors import UserError
+from sim2sim.verdict import ReadyThresholds, verdict
 
 
 @dataclass
@@ -40,6 +41,7 @@ class Sim2SimOptions:
     quiet: bool = False
     argv: list[str] = field(default_factory=list)
     clip_options: dict = field(default_factory=dict)  # load_clip keywords (--objects, --repair)
+    ready: ReadyThresholds = field(default_factory=ReadyThresholds)  # the verdict's thresholds
 
 
 @dataclass
@@ -200,6 +202,7 @@ def evaluate(o: Sim2SimOptions) -> tuple[dict, dict[str, Path]]:
         "episodes": [episode_record(r) for r in results],
         "timing": timing,
     }
+    report["verdict"] = verdict(report, o.ready)  # before merging: it judges the policy evaluated here
     if previous is not None:
         _merge_previous(report, previous)
 

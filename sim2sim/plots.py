@@ -51,6 +51,12 @@ def metric_bars(cells: list[dict], keys: tuple[str, ...], perturbations: list[st
                 errors.append(0.0 if std is None else std)
             ax.bar(x + (i - (len(series) - 1) / 2) * width, values, width, yerr=errors, capsize=2,
                    label=name, color=COLORS[i % len(COLORS)])
+        shown = [cell_value(c, key) for c in cells]
+        if key == "success_rate" and not any(v for v in shown if v is not None):
+            ax.text(0.5, 0.5, "no successes", transform=ax.transAxes, ha="center", va="center", fontsize=14,
+                    color="#a40")  # a row of zero-height bars looks like a plotting failure
+        elif all(v is None or v != v for v in shown):
+            ax.text(0.5, 0.5, "no data", transform=ax.transAxes, ha="center", va="center", fontsize=14)
         ax.set_ylabel(METRIC_LABELS.get(key, key))
         ax.set_xticks(x)
         ax.set_xticklabels(perturbations, rotation=30, ha="right", fontsize=8)

@@ -104,8 +104,18 @@ def fmt_rtf(value) -> str:
     return "-" if value is None else f"{value:.1f}"
 
 
+def _verdict(report: dict) -> list[str]:
+    from sim2sim.verdict import verdict_lines
+
+    return verdict_lines(report["verdict"]) if report.get("verdict") else []
+
+
 def markdown(report: dict) -> str:
-    parts = [f"# sim2sim: {' vs '.join(p['label'] for p in report['policies'])}", "", *_overview(report), ""]
+    verdict = _verdict(report)
+    parts = [f"# sim2sim: {' vs '.join(p['label'] for p in report['policies'])}", ""]
+    if verdict:
+        parts += [f"**{verdict[0]}**", "", *[f"- {line}" for line in verdict[1:]], ""]
+    parts += [*_overview(report), ""]
     for table in [setup_table(report), perturbation_table(report), *result_tables(report)]:
         parts.append(_md_table(table))
     if report.get("videos"):
@@ -150,7 +160,13 @@ def html_page(report: dict, plots: list[tuple[str, bytes]]) -> str:
     e = html.escape
     title = f"sim2sim: {' vs '.join(p['label'] for p in report['policies'])}"
     parts = [f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>{e(title)}</title>",
-             f"<style>{STYLE}</style></head><body data-plots='{len(plots)}'>", f"<h1>{e(title)}</h1><ul>"]
+             f"<style>{STYLE}</style></head><body data-plots='{len(plots)}'>", f"<h1>{e(title)}</h1>"]
+    verdict = _verdict(report)
+    if verdict:
+        color = "#070" if report["verdict"]["ready"] else "#a40"
+        parts.append(f"<h2 id='verdict' style='color:{color}'>{e(verdict[0])}</h2><ul>"
+                     + "".join(f"<li>{e(line)}</li>" for line in verdict[1:]) + "</ul>")
+    parts.append("<ul>")
     parts += [f"<li>{e(line[2:])}</li>" for line in _overview(report)]
     parts.append("</ul>")
     parts.append(_html_table(setup_table(report)))

@@ -21,6 +21,25 @@ METRIC_LABELS = {
 }
 
 
+# What each metric means, printed where it appears (report tables, summary.md).
+METRIC_DEFINITIONS = {
+    "success_rate": "share of episodes that reached the clip's end without an InterMimic early termination or a "
+                    "runtime fault",
+    "duration_s": "seconds of the clip tracked before the episode ended",
+    "E_h_cm": "mean distance between the robot's body links and the reference's, hands excluded",
+    "E_o_cm": "mean distance between the object's surface points and the reference object's; small also when the "
+              "object was never touched and simply stayed where the reference starts, hence the touch note",
+    "mpjpe_g_mm": "g-MPJPE: mean link position error in the world frame",
+    "mpjpe_mm": "MPJPE: mean link position error relative to the pelvis",
+    "e_acc_mm": "E_acc: mean difference of link accelerations (per frame^2)",
+    "e_vel_mm": "E_vel: mean difference of link velocities (per frame)",
+}
+
+
+def definitions_note(keys=("success_rate", *METRIC_KEYS)) -> str:
+    return "; ".join(f"{METRIC_LABELS[k]}: {METRIC_DEFINITIONS[k]}" for k in keys)
+
+
 def episode_record(result: dict) -> dict:
     """One episode as stored in metrics.json (no traces)."""
     return {k: v for k, v in result.items() if k != "trace"}
@@ -44,6 +63,9 @@ def _cell(key: tuple[str, str, str], episodes: list[dict]) -> dict:
         "errors": [e["error"] for e in episodes if "error" in e],
         "success_rate": (sum(bool(e["success"]) for e in ok) / len(ok)) if ok else None,
         "outcomes": dict(Counter(e["outcome"] for e in ok)),
+        "touched_episodes": sum(bool(e.get("object_touched")) for e in ok),
+        "fell_episodes": sum(bool(e.get("fell")) for e in ok),
+        "pushes_applied": sum(e.get("pushes_in_episode", len(e.get("pushes") or [])) for e in ok),
     }
     for k in METRIC_KEYS:
         cell[k] = aggregate(e[k] for e in ok)

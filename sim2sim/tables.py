@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from sim2sim.summary import METRIC_KEYS, METRIC_LABELS, cell_value
+from sim2sim.summary import METRIC_KEYS, METRIC_LABELS, cell_value, definitions_note
 
 
 @dataclass
@@ -60,6 +60,26 @@ def _bus_problems(cell: dict) -> int:
     return bus.get("link_errors", 0) + bus.get("bus_retries", 0) + bus.get("late_cycles", 0)
 
 
+def _e_o(cell: dict) -> str:
+    """E_o with whether the object was touched at all (a robot that fell first leaves it where it started)."""
+    value = fmt(cell_value(cell, "E_o_cm"))
+    touched, episodes = cell.get("touched_episodes"), cell["episodes"] - len(cell["errors"])
+    if touched is None or value == "-":
+        return value
+    return f"{value} (never touched)" if touched == 0 else value + ("" if touched == episodes else
+                                                                  f" (touched {touched}/{episodes})")
+
+
+def perturbation_label(report: dict, name: str) -> str:
+    """The name, or 'name (not applied: ...)' for pushes no episode lived long enough to receive."""
+    spec = next((p for p in report["perturbations"] if p["name"] == name), {})
+    cells = [c for c in report["cells"] if c["perturbation"] == name]
+    if spec.get("changes", {}).get("push_dv", 0) > 0 and cells and all(c.get("pushes_applied", 1) == 0
+                                                                         for c in cells):
+        return f"{name} (not applied: every episode ended before the first push)"
+    return name
+
+
 def result_tables(report: dict) -> list[Table]:
     cells = report["cells"]
     labels = [p["label"] for p in report["policies"]]
@@ -71,14 +91,14 @@ def result_tables(report: dict) -> list[Table]:
         headers = ["perturbation"] + [METRIC_LABELS[k] for k in ("success_rate", *METRIC_KEYS)] + ["episodes"]
         rows = []
         for p in perturbations:
-            row = [p]
+            row = [perturbation_label(report, p)]
             for key in ("success_rate", *METRIC_KEYS):
-                row.append(_joined(cells, labels, clip, p, lambda c, k=key: cell_value(c, k)))
+                getter = _e_o if key == "E_o_cm" else (lambda c, k=key: cell_value(c, k))
+                row.append(_joined(cells, labels, clip, p, getter))
             row.append(_joined(cells, labels, clip, p, lambda c: c["episodes"]))
             rows.append(row)
         tables.append(Table(f"Tracking and success: {clip}" + (f" ({who})" if len(labels) > 1 else ""), headers, rows,
-                            "means over episodes; success = the clip's end reached without an InterMimic early "
-                            "termination or a runtime fault"))
+                            "means over episodes. " + definitions_note()))
 
         outcome_rows = []
         for p in perturbations:
