@@ -16,7 +16,13 @@ class BodyState:
     gyro: np.ndarray  # (3,) rad/s, pelvis frame
     stamp: float  # clock time when this state was measured/received
     tau_est: np.ndarray | None = None  # (N,) N m when the backend reports it
-    mode_machine: int = 0  # robot-reported machine mode, echoed in LowCmd
+    # What a backend reports about the robot's health and identity (None: not reported, not checked).
+    mode_machine: int | None = None  # robot type (deploy.embodiment.MODE_MACHINE), echoed in LowCmd
+    tick: int | None = None  # the robot's LowState counter: must keep advancing
+    motor_error: np.ndarray | None = None  # (N,) motorstate error bits per joint (0 = healthy)
+    motor_temp_c: np.ndarray | None = None  # (N,) hottest temperature sensor of each motor, deg C
+    remote_keys: int | None = None  # wireless remote buttons pressed (deploy.remote.BUTTONS bit map)
+    other_commanders: int = 0  # rt/lowcmd publishers other than us (e.g. sport mode left on)
 
     def is_finite(self) -> bool:
         return bool(

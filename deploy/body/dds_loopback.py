@@ -4,6 +4,10 @@ For developing and testing UnitreeDdsBody on one machine (loopback interface, it
 topics it runs deploy.body.simulated.SimulatedBody; commands with a wrong CRC are counted and ignored, as the
 robot does. It publishes at 100 Hz by default (the robot: 500 Hz) because serialising in Python costs ~0.4 ms a
 message and this robot shares the runtime's process in dry runs. Needs cyclonedds.
+
+What it reports can be changed on demand: `mode_machine`, `tick_frozen`, `motorstate` and `temperature` (per
+motor slot), `remote_keys` (wireless remote buttons), and start_other_commander() adds a second rt/lowcmd writer
+(what sport mode left running looks like).
 """
 
 from __future__ import annotations
@@ -23,6 +27,7 @@ from deploy.body.unitree_dds import (
 )
 from deploy.body.unitree_lowlevel import LowStateFrame
 from deploy.clock import MonotonicClock
+from deploy.remote import wireless_remote_bytes
 
 
 class DdsLoopbackRobot:
@@ -43,6 +48,11 @@ class DdsLoopbackRobot:
         self._endpoint: DdsEndpoint | None = None
         self._lock = threading.Lock()
         self._tick = 0
+        self.tick_frozen = False
+        self.motorstate = np.zeros(num_joints, dtype=np.uint32)
+        self.temperature = np.full(num_joints, 40, dtype=np.int16)
+        self.remote_keys = 0
+        self._other_commander = None
 
     def start(self) -> DdsLoopbackRobot:
         T = idl_types()
@@ -75,15 +85,32 @@ class DdsLoopbackRobot:
             n = self.num_joints
             frame.q[:n], frame.dq[:n] = state.q, state.dq
             frame.imu_quat_wxyz[:] = state.imu_quat_wxyz
+            frame.motorstate[:n] = self.motorstate
+            frame.temperature[:n] = self.temperature[:, None]
+            frame.wireless_remote[:] = np.frombuffer(wireless_remote_bytes(self.remote_keys), dtype=np.uint8)
             frame.with_crc()
             if self.corrupt_state_crc:
                 frame.crc ^= 0x1
             self._endpoint.write(lowstate_to_idl(frame))
-            self._tick += 1
+            self._tick += 0 if self.tick_frozen else 1
             deadline += period
             clock.sleep_until(deadline)
 
+    def start_other_commander(self) -> None:
+        """A second rt/lowcmd writer in its own participant (it sends nothing; being matched is enough)."""
+        from cyclonedds.domain import DomainParticipant
+        from cyclonedds.pub import DataWriter
+        from cyclonedds.topic import Topic
+
+        participant = DomainParticipant(self.domain_id)
+        self._other_commander = (participant, DataWriter(participant, Topic(participant, LOWCMD_TOPIC,
+                                                                            idl_types().LowCmd_)))
+
+    def stop_other_commander(self) -> None:
+        self._other_commander = None  # dropping the references deletes the writer
+
     def stop(self) -> None:
+        self._other_commander = None
         self._stop.set()
         if self._thread is not None:
             self._thread.join(timeout=2.0)

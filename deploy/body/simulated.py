@@ -4,7 +4,10 @@ Each joint follows its PD target with time constant max(kd / kp, min_time_consta
 velocity decays (damping); with kp = kd = 0 it keeps its position (a robot in a gantry). The IMU is upright by
 default, or follows `imu_quat_source()` when a simulated world provides the pelvis orientation. Time comes from
 the injected clock, so fake-clock tests are exact. Faults can be injected: `freeze()` stops new measurements
-(stale state), `inject_nan()` makes the next reading non-finite.
+(stale state), `inject_nan()` makes the next reading non-finite. It reports what the G1's LowState reports, each
+settable on demand: `mode_machine` (5, the 29-DoF rev 1.0), `tick` (advances per reading unless `tick_frozen`),
+`motor_error` bits and `motor_temp_c` per joint, `remote_keys` (wireless remote buttons, deploy.remote) and
+`other_commanders` (other rt/lowcmd publishers).
 """
 
 from __future__ import annotations
@@ -47,6 +50,13 @@ class SimulatedBody(Body):
         self._last_state: BodyState | None = None
         self.commands: list[dict[str, np.ndarray]] = []
         self.keep_commands = True
+        self.mode_machine = 5
+        self.tick = 0
+        self.tick_frozen = False
+        self.motor_error = np.zeros(num_joints, dtype=np.uint32)
+        self.motor_temp_c = np.full(num_joints, 40.0)
+        self.remote_keys = 0
+        self.other_commanders = 0
 
     def connect(self) -> None:
         self.connected = True
@@ -89,7 +99,11 @@ class SimulatedBody(Body):
         now = self.clock.now()
         self._integrate(now)
         quat = UPRIGHT_WXYZ.copy() if self.imu_quat_source is None else np.asarray(self.imu_quat_source(), float)
-        state = BodyState(q=self.q.copy(), dq=self.dq.copy(), imu_quat_wxyz=quat, gyro=np.zeros(3), stamp=now)
+        self.tick += 0 if self.tick_frozen else 1
+        state = BodyState(q=self.q.copy(), dq=self.dq.copy(), imu_quat_wxyz=quat, gyro=np.zeros(3), stamp=now,
+                          mode_machine=self.mode_machine, tick=self.tick, motor_error=self.motor_error.copy(),
+                          motor_temp_c=self.motor_temp_c.copy(), remote_keys=self.remote_keys,
+                          other_commanders=self.other_commanders)
         if self._nan_next:
             state.q[0] = np.nan
             self._nan_next = False

@@ -5,9 +5,11 @@ Message types are declared here as cyclonedds IdlStruct dataclasses with the rob
 (`pip install robot-hoi[deploy-dds]`, i.e. cyclonedds==11.0.1); without it the module still imports and
 `UnitreeDdsBody.connect()` raises a clear MissingDependencyError.
 
-States are stamped with the runtime clock when they arrive (listener thread), so a silent robot shows up as a
-stale state; LowState messages with a wrong CRC are counted and dropped. Commands echo the robot's mode_machine
-and carry the CRC from deploy.body.unitree_lowlevel.
+States are stamped with the runtime clock when they are taken, so a silent robot shows up as a stale state;
+LowState messages with a wrong CRC are counted and dropped. Each state also reports mode_machine, tick, motor
+error bits and temperatures, the wireless remote's buttons and how many other rt/lowcmd writers are matched (a
+reader that ignores our own participant), for deploy.body_health and the operator. Commands echo the robot's
+mode_machine and carry the CRC from deploy.body.unitree_lowlevel.
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ from deploy.body.base import Body, BodyState
 from deploy.body.unitree_lowlevel import NUM_MOTOR_SLOTS, LowCmdFrame, LowStateFrame, make_lowcmd
 from deploy.clock import Clock, MonotonicClock
 from deploy.errors import BodyLinkError, MissingDependencyError
+from deploy.remote import keys_from_wireless_remote
 
 log = logging.getLogger(__name__)
 
@@ -212,6 +215,7 @@ class UnitreeDdsBody(Body):
         self.check_state_crc = check_state_crc
         self._latest: BodyState | None = None
         self._endpoint: DdsEndpoint | None = None
+        self._lowcmd_watch = None  # reader of rt/lowcmd that ignores our own writer: counts other commanders
         self.states_received = 0
         self.crc_errors = 0
         self.commands_sent = 0
@@ -225,8 +229,16 @@ class UnitreeDdsBody(Body):
             raise
         except Exception as exc:  # cyclonedds raises DDSException on a bad interface / domain
             raise BodyLinkError(f"DDS setup failed on interface {self.interface!r}: {exc}") from exc
+        from cyclonedds.qos import Policy, Qos
+        from cyclonedds.sub import DataReader
+        from cyclonedds.topic import Topic
+
+        participant = self._endpoint.participant
+        self._lowcmd_watch = DataReader(participant, Topic(participant, LOWCMD_TOPIC, T.LowCmd_),
+                                        qos=Qos(Policy.History.KeepLast(1), Policy.IgnoreLocal.Participant))
 
     def close(self) -> None:
+        self._lowcmd_watch = None
         if self._endpoint is not None:
             self._endpoint.close()
             self._endpoint = None
@@ -245,6 +257,10 @@ class UnitreeDdsBody(Body):
             stamp=stamp,
             tau_est=frame.tau_est[:n].astype(np.float64),
             mode_machine=int(frame.mode_machine),
+            tick=int(frame.tick),
+            motor_error=frame.motorstate[:n].copy(),
+            motor_temp_c=frame.temperature[:n].max(axis=1).astype(np.float64),
+            remote_keys=keys_from_wireless_remote(frame.wireless_remote),
         )
         self.states_received += 1
 
@@ -259,6 +275,8 @@ class UnitreeDdsBody(Body):
         msg = self._endpoint.take_latest()
         if msg is not None:
             self._accept(msg, self.clock.now())
+        if self._latest is not None and self._lowcmd_watch is not None:
+            self._latest.other_commanders = self._lowcmd_watch.get_subscription_matched_status().current_count
         return self._latest
 
     def send(self, q: np.ndarray, dq: np.ndarray, kp: np.ndarray, kd: np.ndarray, tau: np.ndarray) -> None:
