@@ -6,6 +6,14 @@ The runtime exchanges with the hands once per tick, pipelined: at the end of tic
 worker thread during the loop's sleep, so two hands at 115200 baud fit a 50 Hz loop; with `threaded=False` the
 exchange runs inline (deterministic, for fake-clock tests).
 
+Freshness: a hand is judged by its own replies. Each side remembers when it was last asked (`asked_at`) and
+when it last answered with a good reading (`stamp`); its age is zero while its latest request is answered and
+otherwise how long that request has gone unanswered, so a late loop wake-up (which delays the asking, not the
+answer) is never blamed on the hands. Before the first request the age is that of the reading from connect().
+
+Readings are range-checked before anything uses them: a value outside its register's range (ANGLE_ACT 0..1000,
+FORCE_ACT -4000..4000, TEMP 0..100) is a named fault (hand, finger, register, value) and the reading is dropped.
+
 Failures: the bus already retries (and reopens a lost port). If it still raises HandLinkError, the side tries one
 reconnect in the same cycle; if that fails the side is "link lost" and the reading carries a fault (the runtime
 goes to DAMP). HandFaultError (error bits) is a fault too; its measurements are still used. While in the safe
@@ -17,6 +25,7 @@ opens the hand.
 from __future__ import annotations
 
 import logging
+from collections import deque
 from collections.abc import Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
 from concurrent.futures import TimeoutError as FutureTimeout
@@ -26,7 +35,16 @@ import numpy as np
 
 from deploy.clock import Clock, MonotonicClock
 from deploy.errors import DeployError, HandFaultError, HandLinkError
-from deploy.hand_units import HAND_SIDES, UNITS_OPEN, HandChannel, channel_arrays, rad_to_units, units_to_rad
+from deploy.hand_units import (
+    HAND_SIDES,
+    INSPIRE_CHANNELS,
+    UNITS_OPEN,
+    HandChannel,
+    channel_arrays,
+    rad_to_units,
+    units_to_rad,
+)
+from deploy.hands.tables import REGISTERS
 
 log = logging.getLogger("deploy.hands.pair")
 
@@ -41,6 +59,8 @@ class HandsReading:
     forces: np.ndarray  # (12,) FORCE_ACT grams
     errors: np.ndarray  # (12,) ERROR bits
     stamps: np.ndarray  # (2,) runtime clock time of each side's last good read (NEVER if none)
+    ages: np.ndarray  # (2,) s each side has left its latest request unanswered (0: answered)
+    rad: np.ndarray  # (12,) the angles as joint radians
     faults: list[str] = field(default_factory=list)  # problems the runtime must act on, e.g. "left: link lost: ..."
 
 
@@ -52,6 +72,23 @@ class SideStats:
     reconnects: int = 0
     reconnect_failures: int = 0
     late_cycles: int = 0  # exchange not finished when the next tick collected it
+    reading_faults: int = 0  # readings dropped for a value outside its register's range
+    commands: int = 0  # ANGLE_SET targets the hand acknowledged
+
+
+CHECKED_READINGS = (("ANGLE_ACT", "angles"), ("FORCE_ACT", "forces"), ("TEMP", "temperatures"))
+
+
+def reading_problem(state) -> str | None:
+    """'reading out of range: index ANGLE_ACT = 4000 (valid 0..1000)' for the first bad value, else None."""
+    for register, attribute in CHECKED_READINGS:
+        reg = REGISTERS[register]
+        values = np.asarray(getattr(state, attribute))
+        bad = np.flatnonzero((values < reg.low) | (values > reg.high))
+        if len(bad):
+            i = int(bad[0])
+            return f"reading out of range: {INSPIRE_CHANNELS[i]} {register} = {int(values[i])} (valid {reg.low}..{reg.high})"
+    return None
 
 
 class HandSide:
@@ -70,9 +107,12 @@ class HandSide:
         self.forces = np.zeros(DOF, dtype=np.int64)
         self.errors = np.zeros(DOF, dtype=np.uint8)
         self.stamp = NEVER
+        self.asked_at = NEVER
         self.last_sent: np.ndarray | None = None
         self.link_lost: str | None = None
         self.device_fault: str | None = None
+        self.reading_fault: str | None = None
+        self.command_times: deque[float] = deque(maxlen=4096)
         self.safe_pending = False
         self._last_recovery_try = NEVER
         self.stats = SideStats()
@@ -94,12 +134,26 @@ class HandSide:
             state = getattr(exc, "state", None)
             if state is None:
                 return
+        self.reading_fault = reading_problem(state)
+        if self.reading_fault is not None:
+            self.stats.reading_faults += 1
+            return
         self.angles = np.asarray(state.angles, dtype=np.int64)
         self.forces = np.asarray(state.forces, dtype=np.int64)
         self.errors = np.asarray(state.errors, dtype=np.uint8)
         if np.any(self.errors) and self.device_fault is None:
             self.device_fault = f"{self.side} hand reports error bits {self.errors.tolist()}"
         self.stamp = self.clock.now()
+
+    def age(self, now: float) -> float:
+        """0 while the latest request is answered; otherwise how long it has gone unanswered."""
+        if self.asked_at == NEVER:
+            return now - self.stamp
+        return 0.0 if self.stamp >= self.asked_at else now - self.asked_at
+
+    def command_rate(self, now: float, window_s: float) -> float:
+        """Acknowledged ANGLE_SET commands per second over the last window_s."""
+        return sum(1 for t in self.command_times if t > now - window_s) / window_s
 
     def _safe_units(self) -> np.ndarray | None:
         if self.safe_state == "open":
@@ -150,6 +204,8 @@ class HandSide:
             elif targets is not None:
                 self.bus.write_angles(targets.tolist())
                 self.last_sent = targets.copy()
+                self.stats.commands += 1
+                self.command_times.append(self.clock.now())
             self._read()
         except HandLinkError as exc:
             self.stats.link_errors += 1
@@ -179,6 +235,7 @@ class Hands:
         safe_state: str = "hold",
         threaded: bool = True,
         reconnect_interval_s: float = 0.5,
+        every_n_ticks: int = 1,
     ):
         if safe_state not in SAFE_STATES:
             raise DeployError(f"hand safe state must be one of {SAFE_STATES}, got {safe_state!r}")
@@ -194,6 +251,8 @@ class Hands:
         self.open_rad = np.concatenate(opens)
         self.closed_rad = np.concatenate(closes)
         self.threaded = threaded
+        self.every_n_ticks = max(1, int(every_n_ticks))  # exchange every n-th tick (start-up bus budget)
+        self._cycle_calls = 0
         self._executors = [ThreadPoolExecutor(1, thread_name_prefix=f"hand-{s.side}") for s in self.sides] \
             if threaded else []
         self._pending: list[Future | None] = [None, None]
@@ -232,13 +291,19 @@ class Hands:
 
     def begin_cycle(self, targets_units: np.ndarray | None) -> None:
         """Start the write + read exchange; targets (12,) units or None (read only)."""
+        self._cycle_calls += 1
+        safe_pending = any(side.safe_pending for side in self.sides)
+        if (self._cycle_calls - 1) % self.every_n_ticks and not safe_pending:
+            return
         for i, side in enumerate(self.sides):
             target = None if targets_units is None else np.asarray(targets_units[DOF * i: DOF * (i + 1)], np.int64)
             if not self.threaded:
+                side.asked_at = self.clock.now()
                 side.cycle(target)
                 continue
             if self._pending[i] is not None and not self._pending[i].done():
                 continue  # previous exchange still on the wire: skip, the aging stamp shows it
+            side.asked_at = self.clock.now()
             self._pending[i] = self._executors[i].submit(side.cycle, target)
 
     def finish_cycle(self, wait_s: float = 0.0) -> HandsReading:
@@ -258,13 +323,23 @@ class Hands:
                 faults.append(f"{side.side} hand link lost: {side.link_lost}")
             elif side.device_fault is not None:
                 faults.append(f"{side.side} hand fault: {side.device_fault}")
+            if side.reading_fault is not None:
+                faults.append(f"{side.side} hand {side.reading_fault}")
+        angles = np.concatenate([s.angles for s in self.sides])
+        now = self.clock.now()
         return HandsReading(
-            angles=np.concatenate([s.angles for s in self.sides]),
+            angles=angles,
             forces=np.concatenate([s.forces for s in self.sides]),
             errors=np.concatenate([s.errors for s in self.sides]),
             stamps=np.array([s.stamp for s in self.sides]),
+            ages=np.array([s.age(now) for s in self.sides]),
+            rad=self.rad_from_units(angles),
             faults=faults,
         )
+
+    def command_rates(self, window_s: float) -> dict[str, float]:
+        now = self.clock.now()
+        return {side.side: side.command_rate(now, window_s) for side in self.sides}
 
     def stats(self) -> dict[str, dict]:
         out = {}

@@ -35,6 +35,7 @@ class DeviceRegisters:
         self._by_address = sorted((addr, REGISTERS[name]) for name, addr in self._address.items())
         self.mem = bytearray(1 << 16)
         self.writes: list[WriteRecord] = []
+        self.overrides: dict[tuple[str, int], int] = {}  # (register, element) -> value read instead of the model's
         self._lock = threading.Lock()
         self._put("HAND_ID", [hand_id])
         self._put("ANGLE_SET", model.angle_set)
@@ -133,7 +134,10 @@ class DeviceRegisters:
             measured = self.model.measure()
             for name in groups:
                 if name in LIVE:
-                    self._put(name, measured[name])
+                    values = list(measured[name])
+                    for (register, i), value in self.overrides.items():
+                        values[i] = value if register == name else values[i]
+                    self._put(name, values)
 
     def _log_and_apply(self, address: int, nbytes: int) -> None:
         for start, reg in self._groups_in(address, nbytes):

@@ -15,6 +15,7 @@ error_frame_next. On CAN every reply frame counts (a 12-byte read is 2 replies);
 checksum there, so corrupt_checksum_next sends an error frame in place of the reply (what a CRC error looks
 like to the host), garble_next a reply of the wrong length and partial_next one cut short.
 refuse_writes_next answers the next writes with a refusal; set_error_bits sets ERROR bits in the model;
+override_reading makes a register report a value of your choice (out of range, too);
 disconnect()/reconnect() unplug and replug the hand.
 """
 
@@ -141,6 +142,14 @@ class SimulatedHand:
     # ----------------------------------------------------------------- faults
     def set_error_bits(self, bits: int, fingers=None, sticky: bool = False) -> None:
         self.model.set_error_bits(bits, fingers, sticky)
+
+    def override_reading(self, register: str, finger: int, value: int | None) -> None:
+        """Report `value` in element `finger` of a live register (e.g. ANGLE_ACT = 4000, a firmware glitch or a
+        wrong byte order) until called again with None."""
+        if value is None:
+            self.registers.overrides.pop((register, finger), None)
+        else:
+            self.registers.overrides[(register, finger)] = int(value)
 
     def drop_next(self, n: int = 1) -> None:
         self._queue_fault("drop", n)
