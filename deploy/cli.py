@@ -6,7 +6,6 @@ Only argparse here; the runtime is imported inside the handler so `robot-hoi --h
 from __future__ import annotations
 
 import argparse
-import signal
 import sys
 
 EPILOG = """examples:
@@ -14,7 +13,10 @@ EPILOG = """examples:
   robot-hoi deploy --dry-run --policy policies/dev.onnx --hand-bus can --auto-start
   robot-hoi deploy --dry-run --policy P.onnx --hand-bus serial --hand-port /dev/ttyUSB2 /dev/ttyUSB1   (hands bench)
   robot-hoi deploy --policy P.onnx --dds-interface eth0 --hand-port /dev/ttyUSB2 /dev/ttyUSB1 --tracker-port 9870
-operator (real runs): Enter = start the policy from HOLD, q = stop, x = e-stop; Ctrl-C = DAMP then exit."""
+operator (real runs): Enter or remote START/A = confirm (stiffen from ZERO_TORQUE; start the policy from HOLD),
+q or remote SELECT = stop, x or remote B = e-stop; Ctrl-C, SIGTERM, SIGHUP = DAMP, summary, exit.
+exit codes: 0 completed, 1 fault, 2 usage, 3 not started, 4 refused, 5 e-stop, 70 crash, 128+N signal N
+(deploy/README.md)."""
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -26,7 +28,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--duration", type=float, default=None, help="run this many seconds, then DAMP and exit")
     p.add_argument("--rate", type=float, default=None, help="loop rate in Hz (default 1/control_dt; dry runs only)")
     p.add_argument("--log-dir", default=None, help="where events.jsonl, ticks/ and summary.json go")
-    p.add_argument("--auto-start", action="store_true", help="start the policy from HOLD without the operator")
+    p.add_argument("--auto-start", action="store_true",
+                   help="dry runs: confirm ZERO_TORQUE and HOLD without the operator (refused for a real body)")
+    p.add_argument("--auto-start-on", default=None, metavar="IFACE",
+                   help="auto-start a DDS simulator (not a dry run) reached on IFACE; must equal --dds-interface")
+    p.add_argument("--status", choices=("auto", "plain", "off"), default="auto",
+                   help="live status on stderr: rich line on a terminal, plain lines otherwise (default auto)")
     p.add_argument("--spin-ms", type=float, default=1.0,
                    help="busy-wait this long before each deadline for tight wake-ups (default 1.0; 0 = sleep only)")
     p.add_argument("--rt-priority", type=int, default=None, metavar="N",
@@ -60,6 +67,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     safety.add_argument("--damp-s", type=float, default=None, help="DAMP duration before exit (default 1.0)")
     safety.add_argument("--max-input-age-periods", type=float, default=None, metavar="N",
                         help="body/hand/tracker data older than N control periods -> DAMP (default 2)")
+    safety.add_argument("--max-overruns", type=int, default=None, metavar="N",
+                        help="more than N loop overruns within 1 s -> DAMP (default 5)")
+    safety.add_argument("--min-hand-rate-share", type=float, default=None, metavar="F",
+                        help="hands acknowledging commands below F x the loop rate (over 1 s) -> DAMP (default 0.5)")
+    safety.add_argument("--max-motor-temp", dest="max_motor_temp_c", type=float, default=None, metavar="C",
+                        help="a body motor at or above C deg C refuses the start / damps (default 90)")
 
 
 def register(subparsers) -> None:
@@ -79,7 +92,8 @@ def options_from_args(args: argparse.Namespace):
     from deploy.session import DeployOptions
 
     safety = SafetyConfig()
-    for name in ("zero_torque_s", "ramp_s", "damp_s", "max_input_age_periods"):
+    for name in ("zero_torque_s", "ramp_s", "damp_s", "max_input_age_periods", "max_overruns",
+                 "min_hand_rate_share", "max_motor_temp_c"):
         value = getattr(args, name)
         if value is not None:
             setattr(safety, name, value)
@@ -90,31 +104,47 @@ def options_from_args(args: argparse.Namespace):
         hand_safe_state=args.hand_safe_state, hand_force_limit=args.hand_force_limit, hand_speed=args.hand_speed,
         body=args.body, dds_interface=args.dds_interface, dds_domain=args.dds_domain, tracker=args.tracker,
         tracker_host=args.tracker_host, tracker_port=args.tracker_port, duration=args.duration, rate=args.rate,
-        log_dir=args.log_dir, auto_start=args.auto_start, spin_s=max(0.0, args.spin_ms) * 1e-3,
-        realtime_priority=args.rt_priority, safety=safety,
+        log_dir=args.log_dir, auto_start=args.auto_start, auto_start_on=args.auto_start_on,
+        spin_s=max(0.0, args.spin_ms) * 1e-3, realtime_priority=args.rt_priority, safety=safety, status=args.status,
     )
 
 
 def handler(args: argparse.Namespace) -> int:
+    """Run; the exit code says why the run ended (deploy.outcome). Signals go through deploy.signals."""
     import logging
 
     from deploy.session import Session, format_summary
+    from deploy.signals import Interrupted, SignalRouter
 
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
     options = options_from_args(args)
-    with Session(options) as session:
-        previous = signal.getsignal(signal.SIGINT)
-        signal.signal(signal.SIGINT, lambda *_: session.runtime.request_estop("SIGINT"))
+    with SignalRouter() as signals:
         try:
-            summary = session.run()
-        finally:
-            signal.signal(signal.SIGINT, previous)
-        path = session.write_summary(summary)
+            with Session(options) as session:
+                signals.target = session.runtime
+                try:
+                    summary = session.run()
+                finally:
+                    signals.target, signals.finished = None, True
+                path = session.write_summary(summary)
+        except Interrupted as exc:
+            print(f"deploy: {exc}; nothing was commanded", file=sys.stderr)
+            return 128 + exc.signum
+        except Exception as exc:
+            if getattr(exc, "user_error", False):
+                raise  # one line and exit 2, printed by the entry point
+            import traceback
+
+            traceback.print_exc()
+            return 70  # deploy.outcome.Outcome.CRASHED; summary.json (if the run had started) says more
     mode = "dry run" if options.dry_run else "robot"
-    print(f"deploy ({mode}): {options.policy}")
-    print(format_summary(summary))
-    print(f"  {'summary':<17} {path}")
-    return 1 if summary["faults"] else 0
+    try:  # after SIGHUP the terminal may be gone; summary.json is already written
+        print(f"deploy ({mode}): {options.policy}")
+        print(format_summary(summary))
+        print(f"  {'summary':<17} {path}", flush=True)
+    except OSError:
+        pass
+    return summary["exit_code"]
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -1,13 +1,18 @@
 """The control loop: one tick = read inputs, step the safety state machine, compute and send commands.
 
 Timing uses absolute deadlines on an injectable clock: deadline_k = start + k * dt, the loop sleeps until the
-next deadline (never `sleep(dt)` after compute), counts overruns and skips deadlines it has already missed. Each
-tick's lateness (wake-up - deadline), period (wake-up - previous wake-up) and compute time are recorded.
+next deadline (never `sleep(dt)` after compute), counts overruns (too many within a window is a fault) and skips
+deadlines it has already missed. Each tick's lateness (wake-up - deadline), period (wake-up - previous wake-up)
+and compute time are recorded (deploy.loop_timing).
+
+Stopping: request_stop (operator, duration), request_estop and request_signal all end in DAMP; a second request
+aborts after one damping command. `outcome` (deploy.outcome) says why the run ended.
 
 A tick, in order:
     1. collect last tick's hand exchange (hands.finish_cycle), read the body state and the tracker poses,
-       poll the operator
-    2. safety: input faults -> DAMP; phase transitions (see deploy.safety)
+       poll the operator (keyboard/script) and the wireless remote
+    2. safety: input, body health and identity faults -> DAMP (before stiffening: refuse); operator gates;
+       phase transitions (see deploy.safety)
     3. phase command: zero torque / ramp / hold / policy targets / damping; targets are clamped to the joint
        limits and rate limited, then checked once more
     4. send the body command, start the hand exchange (targets, or the safe state), record the tick
@@ -15,23 +20,23 @@ A tick, in order:
 
 from __future__ import annotations
 
-import contextlib
-import math
-import os
 import sys
-import threading
 from dataclasses import dataclass
 
 import numpy as np
 
 from deploy.body.base import Body, BodyState
-from deploy.clock import Clock, MonotonicClock
+from deploy.body_health import TickWatch, identity_faults
+from deploy.clock import Clock, MonotonicClock, restore_scheduling, set_realtime
 from deploy.contract import PolicyContract
 from deploy.errors import BodyLinkError
 from deploy.hand_pair import Hands, HandsReading
+from deploy.loop_timing import LoopTiming
 from deploy.observations import ObservationBuilder, RobotState
 from deploy.operator import OperatorInput
-from deploy.runlog import EventLog, TickRecorder
+from deploy.outcome import Outcome, StopRequests, classify
+from deploy.remote import RemotePresses
+from deploy.runlog import EventLog, TickRecorder, tick_row
 from deploy.safety import (
     COMMANDING_PHASES,
     Phase,
@@ -43,6 +48,13 @@ from deploy.safety import (
     tracker_faults,
 )
 from deploy.tracking import PoseTracker, TrackedPoses
+
+GATES = (Phase.ZERO_TORQUE, Phase.HOLD)  # the phases that wait for the operator's confirmation
+PROMPTS = {
+    Phase.ZERO_TORQUE: "robot limp (zero torque): press Enter or remote START/A to stiffen and ramp to the default pose",
+    Phase.HOLD: "HOLD reached: press Enter or remote START/A to start the policy",
+}
+HAND_COMMANDING = (Phase.RAMP_TO_DEFAULT, Phase.HOLD, Phase.POLICY)
 
 
 @dataclass
@@ -72,6 +84,8 @@ class Runtime:
         rate_hz: float | None = None,
         gil_switch_interval_s: float | None = 2e-4,
         realtime_priority: int | None = None,
+        expected_mode_machine: int | None = None,
+        status=None,
     ):
         self.contract = contract
         self.policy = policy
@@ -84,15 +98,20 @@ class Runtime:
         self.operator = operator or OperatorInput()
         self.events = events or EventLog(self.clock)
         self.recorder = recorder or TickRecorder(None)
+        self.status = status  # deploy.status view, updated once per tick (None: no live view)
         self.dt = 1.0 / rate_hz if rate_hz else contract.control_dt
         # The hand I/O threads and simulated devices share the GIL with the loop; Python's default 5 ms switch
         # interval would let them delay a wake-up by milliseconds. run() shortens it while it runs.
         self.gil_switch_interval_s = gil_switch_interval_s
         # SCHED_FIFO priority for the loop thread only (Linux; needs CAP_SYS_NICE). None: normal scheduling.
         self.realtime_priority = realtime_priority
+        self.expected_mode_machine = expected_mode_machine
         self.num_body = contract.num_body
         self.needs_tracker = contract.uses_reference or contract.uses_object
         self.shaper = TargetShaper(contract, self.dt, self.safety.max_target_rate)
+        self.timing = LoopTiming(self.dt, self.safety.max_overruns, self.safety.overrun_window_s)
+        self.ticks_watch = TickWatch(self.safety.max_input_age_periods * self.dt)
+        self.remote = RemotePresses()
 
         self.phase = Phase.WAIT_STATE
         self.phase_since = self.clock.now()
@@ -101,33 +120,46 @@ class Runtime:
         self.policy_tick = 0
         self._policy_deadline0 = 0.0
         self._ramp_from: np.ndarray | None = None
-        self._start_requested = False
+        self._confirmed = False  # the operator confirmed the gate the runtime is waiting at
         self._start_refusal: str | None = None
-        self._estop_reason: str | None = None
-        self._abort = threading.Event()
-        self._stop_reason: str | None = None
+        self.stops = StopRequests()
         self.exit_reason = ""
         self.fault_reasons: list[str] = []
+        self.refused = False
         self.body_send_errors = 0
-        self._send_fault: str | None = None
+        self._deferred_faults: list[str] = []  # found outside a tick (failed send, overruns): acted on next tick
+        self._hands_commanded_since: float | None = None
         self.policy_steps = 0
         self.ticks = 0
-        self.overruns = 0
-        self.missed_deadlines = 0
-        self.timing = {"lateness": [], "period": [], "compute": []}
         self._last_measured_q = np.zeros(self.num_body)
         self._clamp_state = (frozenset(), frozenset())
 
-    # ------------------------------------------------------------------ operator hooks (thread / signal safe)
+    # ------------------------------------------------------------------ stop and start hooks (thread / signal safe)
     def request_start(self) -> None:
-        """Start the policy if the runtime is in HOLD (ignored in other phases)."""
-        self._start_requested = self.phase == Phase.HOLD
+        """Confirm the gate the runtime waits at (ZERO_TORQUE: stiffen; HOLD: start the policy)."""
+        self._confirmed = self.phase in GATES
+
+    def request_stop(self, reason: str, kind: str = "operator") -> None:
+        """End the run through DAMP (kind: operator, duration, estop or signal); twice: abort."""
+        self.stops.request(reason, kind)
 
     def request_estop(self, reason: str = "e-stop") -> None:
         """DAMP at the next tick, then exit; a second request aborts right after one damping command."""
-        if self._estop_reason is not None:
-            self._abort.set()
-        self._estop_reason = reason
+        self.stops.request(reason, "estop")
+
+    def request_signal(self, signum: int) -> None:
+        self.stops.signal(signum)
+
+    @property
+    def prompt(self) -> str | None:
+        """What the operator is asked to do now (None: nothing)."""
+        waiting = self.phase in GATES and self.safety.auto_start_after_s is None and not self._confirmed
+        return PROMPTS[self.phase] if waiting else None
+
+    @property
+    def outcome(self) -> Outcome:
+        return classify(refused=self.refused, faults=bool(self.fault_reasons), stops=self.stops,
+                        policy_ran=self.policy_steps > 0)
 
     # ------------------------------------------------------------------ state machine
     def _enter(self, phase: Phase, reason: str, now: float) -> None:
@@ -135,9 +167,14 @@ class Runtime:
         self.phase_time[previous.name] = self.phase_time.get(previous.name, 0.0) + (now - self.phase_since)
         self.phase = phase
         self.phase_since = now
+        self._confirmed = False  # a confirmation is for one gate only
         self.events.log("phase", tick=self.ticks, **{"from": previous.name, "to": phase.name}, reason=reason)
+        if self.prompt:
+            self.events.log("prompt", tick=self.ticks, phase=phase.name, message=self.prompt)
         if phase == Phase.DAMP:
             self.hands.request_safe_state()
+        if phase == Phase.RAMP_TO_DEFAULT:
+            self._hands_commanded_since = now
 
     def _fault(self, reasons: list[str], now: float) -> None:
         for reason in reasons:
@@ -145,23 +182,42 @@ class Runtime:
             self.events.log("fault", tick=self.ticks, phase=self.phase.name, reason=reason)
         self._enter(Phase.DAMP, "; ".join(reasons), now)
 
-    def _handle_operator(self, now: float) -> None:
-        for event in self.operator.poll():
-            self.events.log("operator", tick=self.ticks, phase=self.phase.name, request=event)
+    def _handle_operator(self, body: BodyState | None) -> None:
+        remote = self.remote.update(body.remote_keys if body is not None else None)
+        for source, event in [("operator", e) for e in self.operator.poll()] + [("remote", e) for e in remote]:
+            self.events.log("operator", tick=self.ticks, phase=self.phase.name, request=event, source=source)
             if event == "start":
-                if self.phase == Phase.HOLD:
-                    self._start_requested = True
-                else:  # a start pressed during the ramp must not fire later by surprise
+                if self.phase in GATES:
+                    self._confirmed = True
+                else:  # a press during the ramp must not fire later by surprise
                     self.events.log("start_ignored", tick=self.ticks, phase=self.phase.name,
-                                    reason="the policy starts only from HOLD")
+                                    reason="the operator confirms in ZERO_TORQUE (stiffen) and HOLD (start) only")
             elif event == "stop":
-                self._stop_reason = "operator stop"
+                self.request_stop("operator stop" if source == "operator" else "remote stop")
             elif event == "estop":
-                self.request_estop("operator e-stop")
+                self.request_estop("operator e-stop" if source == "operator" else "remote e-stop")
 
     def _measured_q(self, body: BodyState | None, hands: HandsReading) -> np.ndarray:
         q_body = body.q if body is not None and body.is_finite() else self._last_measured_q
-        return np.concatenate([q_body, self.hands.rad_from_units(hands.angles)])
+        return np.concatenate([q_body, hands.rad])
+
+    def _health_faults(self, now: float, body: BodyState | None) -> tuple[list[str], list[str]]:
+        """(identity and health faults, tick faults) of this body state."""
+        if body is None:
+            return [], []
+        identity = identity_faults(body, self.contract.actuator_names, self.expected_mode_machine,
+                                   self.safety.max_motor_temp_c)
+        tick = self.ticks_watch.fault(body, now)
+        return identity, [tick] if tick else []
+
+    def _hand_rate_fault(self, now: float) -> list[str]:
+        share, window = self.safety.min_hand_rate_share, self.safety.hand_rate_window_s
+        since = self._hands_commanded_since
+        if share is None or self.phase not in HAND_COMMANDING or since is None or now - since < window:
+            return []
+        loop_hz = 1.0 / self.dt
+        return [f"{side} hand commanded at {rate:.1f} Hz, below {share:.0%} of the {loop_hz:.0f} Hz loop"
+                for side, rate in self.hands.command_rates(window).items() if rate < share * loop_hz][:1]
 
     # ------------------------------------------------------------------ one tick
     def tick(self, deadline: float | None = None) -> bool:
@@ -171,15 +227,21 @@ class Runtime:
         reading = self.hands.finish_cycle(self.safety.hand_wait_fraction * self.dt)
         body = self.body.read_state()
         poses = self.tracker.read()
-        self._handle_operator(now)
+        self._handle_operator(body)
         if body is not None and body.is_finite():
             self._last_measured_q = body.q.copy()
+        identity, tick_faults = self._health_faults(now, body)
 
         if self.phase == Phase.WAIT_STATE:
             faults = input_faults(now, self.dt, self.safety, self.contract, body, reading, poses,
-                                  need_tracker=self.needs_tracker)
-            if self._estop_reason or self._stop_reason:
-                self.exit_reason = f"{self._estop_reason or self._stop_reason} before start (nothing commanded)"
+                                  need_tracker=self.needs_tracker) + tick_faults
+            if self.stops.first:
+                self.exit_reason = f"{self.stops.reason} before start (nothing commanded)"
+                return self._finish_tick(now, deadline, body, reading, poses, None, None, None)
+            if identity:
+                self.refused = True
+                self.exit_reason = "refused to start (nothing commanded): " + "; ".join(identity)
+                self.events.log("refused", tick=self.ticks, reason=self.exit_reason)
                 return self._finish_tick(now, deadline, body, reading, poses, None, None, None)
             if not faults:
                 self._enter(Phase.ZERO_TORQUE, "body, hands and tracker report fresh data", now)
@@ -190,21 +252,23 @@ class Runtime:
         elif self.phase in COMMANDING_PHASES:
             faults = input_faults(now, self.dt, self.safety, self.contract, body, reading, poses,
                                   need_tracker=self.phase == Phase.POLICY and self.needs_tracker)
-            if self._send_fault:
-                faults.append(self._send_fault)
-                self._send_fault = None
+            faults += identity + tick_faults + self._deferred_faults + self._hand_rate_fault(now)
+            self._deferred_faults = []
             if faults:
+                self.refused = self.refused or bool(identity and self.phase == Phase.ZERO_TORQUE)
                 self._fault(faults, now)
-            elif self._estop_reason or self._stop_reason:
-                self._enter(Phase.DAMP, self._estop_reason or self._stop_reason, now)
+            elif self.stops.first:
+                self._enter(Phase.DAMP, self.stops.reason, now)
 
         target, action = None, None
-        if self.phase == Phase.ZERO_TORQUE and now - self.phase_since >= self.safety.zero_torque_s:
+        if self.phase == Phase.ZERO_TORQUE and now - self.phase_since >= self.safety.zero_torque_s \
+                and (self._confirmed or self.safety.auto_start_after_s is not None):
             # start from the measured pose, inside the limits (unit conversion can land a hair outside them)
             self._ramp_from = np.clip(self._measured_q(body, reading), self.contract.joint_lower,
                                       self.contract.joint_upper)
             self.shaper.reset(self._ramp_from)
-            self._enter(Phase.RAMP_TO_DEFAULT, f"ramp to default pose over {self.safety.ramp_s} s", now)
+            how = "operator confirmed" if self._confirmed else "auto start"
+            self._enter(Phase.RAMP_TO_DEFAULT, f"{how}: ramp to default pose over {self.safety.ramp_s} s", now)
         if self.phase == Phase.RAMP_TO_DEFAULT:
             alpha = min(1.0, (now - self.phase_since) / self.safety.ramp_s) if self.safety.ramp_s > 0 else 1.0
             target = self._ramp_from + alpha * (self.contract.default_pose - self._ramp_from)
@@ -213,7 +277,7 @@ class Runtime:
         elif self.phase == Phase.HOLD:
             target = self.contract.default_pose.copy()
             if self._can_start(now, poses):
-                self._enter(Phase.POLICY, "operator start" if self._start_requested else "auto start", now)
+                self._enter(Phase.POLICY, "operator start" if self._confirmed else "auto start", now)
                 self._policy_deadline0 = deadline
                 self.last_action = np.zeros(self.contract.num_actions)
         if self.phase == Phase.POLICY:
@@ -223,17 +287,19 @@ class Runtime:
         if self.phase == Phase.DAMP and now - self.phase_since >= self.safety.damp_s:
             self._send_damping(body)
             self.hands.begin_cycle(None)
-            cause = f"fault: {self.fault_reasons[0]}" if self.fault_reasons else (self._estop_reason or self._stop_reason)
+            cause = f"fault: {self.fault_reasons[0]}" if self.fault_reasons else self.stops.reason
             self.exit_reason = self.exit_reason or f"{cause or 'stopped'}; damped {self.safety.damp_s} s"
             return self._finish_tick(now, deadline, body, reading, poses, action, None, None)
         command, hand_units = self._command(now, body, target)
+        if self.stops.aborted:
+            self.exit_reason = self.exit_reason or f"{self.stops.reason} twice: aborted after one damping command"
         return self._finish_tick(now, deadline, body, reading, poses, action, command, hand_units,
-                                 keep_going=not self._abort.is_set())
+                                 keep_going=not self.stops.aborted)
 
     def _can_start(self, now: float, poses: TrackedPoses) -> bool:
         held = now - self.phase_since
         auto = self.safety.auto_start_after_s
-        if not (self._start_requested or (auto is not None and held >= auto)):
+        if not (self._confirmed or (auto is not None and held >= auto)):
             return False
         if auto is not None and held < auto:
             return False
@@ -332,7 +398,7 @@ class Runtime:
         except BodyLinkError as exc:
             self.body_send_errors += 1
             self.events.log("error", tick=self.ticks, reason=f"body send failed: {exc}")
-            self._send_fault = f"body send failed: {exc}"  # acted on (DAMP) at the next tick
+            self._deferred_faults.append(f"body send failed: {exc}")  # acted on (DAMP) at the next tick
 
     def _log_shaping(self) -> None:
         names = self.contract.actuator_names
@@ -345,33 +411,8 @@ class Runtime:
 
     # ------------------------------------------------------------------ recording
     def _finish_tick(self, now, deadline, body, reading, poses, action, command, hand_units, keep_going=False):
-        n, a = self.num_body, self.contract.num_actions
-        nan = np.full(n, np.nan)
-        self.recorder.record({
-            "t": now,
-            "deadline": deadline,
-            "phase": int(self.phase),
-            "policy_tick": self.policy_tick if self.phase == Phase.POLICY else -1,
-            "q": body.q if body is not None else nan,
-            "dq": body.dq if body is not None else nan,
-            "imu_quat_wxyz": body.imu_quat_wxyz if body is not None else np.full(4, np.nan),
-            "gyro": body.gyro if body is not None else np.full(3, np.nan),
-            "body_age": now - body.stamp if body is not None else np.inf,
-            "hand_angles": reading.angles,
-            "hand_forces": reading.forces,
-            "hand_errors": reading.errors,
-            "hand_age": now - reading.stamps,
-            "robot_pos": poses.robot.pos,
-            "robot_quat_wxyz": poses.robot.quat_wxyz,
-            "object_pos": poses.object.pos,
-            "object_quat_wxyz": poses.object.quat_wxyz,
-            "tracker_age": np.array([now - poses.robot.stamp, now - poses.object.stamp]),
-            "action": action if action is not None else np.full(a, np.nan),
-            "cmd_q": command.q if command is not None else nan,
-            "cmd_kp": command.kp if command is not None else nan,
-            "cmd_kd": command.kd if command is not None else nan,
-            "cmd_hand_units": hand_units if hand_units is not None else np.full(12, -1),
-        })
+        self.recorder.record(tick_row(now, deadline, self.phase, self.policy_tick, body, reading, poses, action,
+                                      command, hand_units, self.num_body, self.contract.num_actions))
         self.ticks += 1
         return keep_going
 
@@ -382,7 +423,6 @@ class Runtime:
         start = clock.now()
         self.phase_since = start
         deadline = start
-        previous_wake = None
         previous_interval = sys.getswitchinterval()
         if self.gil_switch_interval_s is not None:
             sys.setswitchinterval(self.gil_switch_interval_s)
@@ -391,89 +431,81 @@ class Runtime:
         try:
             while True:
                 wake = clock.now()
-                if duration_s is not None and wake - start >= duration_s and self._stop_reason is None:
-                    self._stop_reason = "duration reached"
+                if duration_s is not None and wake - start >= duration_s and self.stops.first is None:
+                    self.request_stop("duration reached", "duration")
                     if self.phase == Phase.WAIT_STATE:
                         self.exit_reason = "duration reached before inputs were ready"
                 keep_going = self.tick(deadline)
                 done = clock.now()
-                self.timing["lateness"].append(wake - deadline)
-                self.timing["compute"].append(done - wake)
-                if previous_wake is not None:
-                    self.timing["period"].append(wake - previous_wake)
-                previous_wake = wake
+                self.timing.record(wake, deadline, done)
+                if self.status is not None:
+                    self.status.update(self)
                 if not keep_going or (self.exit_reason and self.phase == Phase.WAIT_STATE):
                     break
                 deadline += self.dt
                 if done > deadline:
-                    skipped = math.ceil((done - deadline) / self.dt)
-                    self.overruns += 1
-                    self.missed_deadlines += skipped
-                    if self.overruns <= 10 or self.overruns % 100 == 0:
-                        self.events.log("overrun", tick=self.ticks, late_ms=(done - deadline) * 1e3,
-                                        skipped=skipped, count=self.overruns)
-                    deadline += skipped * self.dt
+                    deadline += self._overrun(done, deadline) * self.dt
                 clock.sleep_until(deadline)
         except BaseException as exc:
             self.events.log("error", tick=self.ticks, reason=f"runtime crashed: {type(exc).__name__}: {exc}")
             try:
                 self._send_damping(None)
             finally:
-                self.exit_reason = self.exit_reason or f"crashed: {type(exc).__name__}"
+                self.exit_reason = self.exit_reason or f"crashed: {type(exc).__name__}: {exc}"
             raise
         finally:
             sys.setswitchinterval(previous_interval)
-            self._restore_scheduling()
+            restore_scheduling(self.realtime_priority)
             end = clock.now()
             self.phase_time[self.phase.name] = self.phase_time.get(self.phase.name, 0.0) + (end - self.phase_since)
             self.phase_since = end
-            self.events.log("stop", reason=self.exit_reason or self._stop_reason or "", ticks=self.ticks,
-                            final_phase=self.phase.name)
+            self.events.log("stop", reason=self.exit_reason or self.stops.reason or "", ticks=self.ticks,
+                            final_phase=self.phase.name, outcome=self.outcome.name)
         return self.summary()
 
+    def _overrun(self, done: float, next_deadline: float) -> int:
+        """Count it, log it, fault on too many; returns the deadlines to skip."""
+        skipped = self.timing.overrun(done, next_deadline)
+        count = self.timing.overruns
+        if count <= 10 or count % 100 == 0:
+            self.events.log("overrun", tick=self.ticks, late_ms=(done - next_deadline) * 1e3, skipped=skipped,
+                            count=count)
+        problem = self.timing.overrun_fault()
+        if problem and self.phase in COMMANDING_PHASES and problem not in self._deferred_faults:
+            self._deferred_faults.append(problem)
+        return skipped
+
     def _set_realtime(self) -> str:
-        """Give the loop thread SCHED_FIFO if asked; threads started before keep their own scheduling."""
-        self.scheduling = "normal"
-        if self.realtime_priority is None:
-            return self.scheduling
-        try:
-            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(self.realtime_priority))
-        except (AttributeError, PermissionError, OSError) as exc:
-            self.events.log("warning", reason=f"real-time priority not available ({exc}); normal scheduling")
-            return "normal"
-        self.scheduling = f"SCHED_FIFO {self.realtime_priority}"
+        self.scheduling, problem = set_realtime(self.realtime_priority)
+        if problem:
+            self.events.log("warning", reason=problem)
         return self.scheduling
 
-    def _restore_scheduling(self) -> None:
-        if self.realtime_priority is not None:
-            with contextlib.suppress(AttributeError, PermissionError, OSError):
-                os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
-
     def summary(self) -> dict:
-        def stats_ms(values, absolute=False, minus=0.0):
-            if not values:
-                return {"p50": None, "p99": None, "max": None}
-            arr = np.asarray(values) - minus
-            arr = np.abs(arr) if absolute else arr
-            return {k: float(v) * 1e3 for k, v in
-                    (("p50", np.percentile(arr, 50)), ("p99", np.percentile(arr, 99)), ("max", arr.max()))}
-
+        outcome = self.outcome
+        commanded_s = self.phase_time_commanding()
+        hands = self.hands.stats()
+        for entry in hands.values():
+            entry["command_rate_hz"] = entry["commands"] / commanded_s if commanded_s > 0 else None
         return {
-            "exit_reason": self.exit_reason or self._stop_reason or "",
+            "exit_reason": self.exit_reason or self.stops.reason or "",
+            "outcome": outcome.name,
+            "exit_code": outcome.code,
             "final_phase": self.phase.name,
             "faults": list(self.fault_reasons),
             "rate_hz": 1.0 / self.dt,
+            "hand_rate_hz": 1.0 / (self.dt * self.hands.every_n_ticks),
             "scheduling": getattr(self, "scheduling", "normal"),
             "ticks": self.ticks,
             "policy_steps": self.policy_steps,
             "phase_time_s": dict(self.phase_time),
-            "overruns": self.overruns,
-            "missed_deadlines": self.missed_deadlines,
-            "lateness_ms": stats_ms(self.timing["lateness"]),
-            "period_error_ms": stats_ms(self.timing["period"], absolute=True, minus=self.dt),
-            "compute_ms": stats_ms(self.timing["compute"]),
+            **self.timing.summary(),
             "clamped_ticks": self.shaper.clamped_ticks,
             "rate_limited_ticks": self.shaper.rate_limited_ticks,
             "body_send_errors": self.body_send_errors,
-            "hands": self.hands.stats(),
+            "hands": hands,
         }
+
+    def phase_time_commanding(self) -> float:
+        """Seconds the hands were given targets (RAMP_TO_DEFAULT, HOLD, POLICY)."""
+        return sum(self.phase_time.get(p.name, 0.0) for p in HAND_COMMANDING)

@@ -1,10 +1,12 @@
-"""Operator input for the runtime: start the policy from HOLD, stop, e-stop.
+"""Operator input for the runtime: confirm (stiffen, start the policy), stop, e-stop.
 
-`poll()` returns the events that arrived since the last call: "start", "stop" (end the run through DAMP) or
-"estop" (DAMP now). A "start" outside HOLD is ignored. Implementations: `OperatorInput` (no operator: dry runs
-with SafetyConfig.auto_start_after_s), `KeyboardOperator` (a thread reading lines on stdin: Enter or "s" = start,
-"q" = stop, "x"/"e" = e-stop), `ScriptedOperator` (events at given clock times, for tests). SIGINT is wired to
-Runtime.request_estop by the CLI.
+`poll()` returns the events that arrived since the last call: "start" (confirm the gate the runtime waits at:
+ZERO_TORQUE -> stiffen and ramp to the default pose, HOLD -> start the policy; ignored elsewhere), "stop" (end
+the run through DAMP) or "estop" (DAMP now). Implementations: `OperatorInput` (no operator: dry runs with
+SafetyConfig.auto_start_after_s), `KeyboardOperator` (a thread reading lines on stdin: Enter or "s" = start,
+"q" = stop, "x"/"e" = e-stop), `ScriptedOperator` (events at given clock times, for tests). The wireless remote
+(deploy.remote) arrives with the body state and is read by the runtime itself; signals come through
+deploy.signals.
 """
 
 from __future__ import annotations

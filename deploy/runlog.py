@@ -117,6 +117,37 @@ class TickRecorder:
         self._thread = None
 
 
+def tick_row(now, deadline, phase, policy_tick, body, reading, poses, action, command, hand_units, num_body,
+             num_actions) -> dict:
+    """One tick's record; NaN (or -1 for hand units) where the tick had no value."""
+    nan = np.full(num_body, np.nan)
+    return {
+        "t": now,
+        "deadline": deadline,
+        "phase": int(phase),
+        "policy_tick": policy_tick if phase.name == "POLICY" else -1,
+        "q": body.q if body is not None else nan,
+        "dq": body.dq if body is not None else nan,
+        "imu_quat_wxyz": body.imu_quat_wxyz if body is not None else np.full(4, np.nan),
+        "gyro": body.gyro if body is not None else np.full(3, np.nan),
+        "body_age": now - body.stamp if body is not None else np.inf,
+        "hand_angles": reading.angles,
+        "hand_forces": reading.forces,
+        "hand_errors": reading.errors,
+        "hand_age": reading.ages,  # each hand's own silence (0: its latest request is answered)
+        "robot_pos": poses.robot.pos,
+        "robot_quat_wxyz": poses.robot.quat_wxyz,
+        "object_pos": poses.object.pos,
+        "object_quat_wxyz": poses.object.quat_wxyz,
+        "tracker_age": np.array([now - poses.robot.stamp, now - poses.object.stamp]),
+        "action": action if action is not None else np.full(num_actions, np.nan),
+        "cmd_q": command.q if command is not None else nan,
+        "cmd_kp": command.kp if command is not None else nan,
+        "cmd_kd": command.kd if command is not None else nan,
+        "cmd_hand_units": hand_units if hand_units is not None else np.full(12, -1),
+    }
+
+
 def load_ticks(log_dir: str | Path) -> dict[str, np.ndarray]:
     chunks = sorted((Path(log_dir) / "ticks").glob("chunk_*.npz"))
     if not chunks:

@@ -3,17 +3,22 @@
 Phases (an explicit state machine, driven by deploy.loop.Runtime):
 
     WAIT_STATE -> ZERO_TORQUE -> RAMP_TO_DEFAULT -> HOLD -> POLICY -> DAMP
-    WAIT_STATE       nothing is sent until body, hands (and the tracker, if the policy needs it) report fresh data
-    ZERO_TORQUE      kp = kd = 0 for `zero_torque_s` (the robot hangs limp in its gantry)
+    WAIT_STATE       nothing is sent until body, hands (and the tracker, if the policy needs it) report fresh data;
+                     a robot of the wrong type (mode_machine) or already unhealthy is refused here
+    ZERO_TORQUE      kp = kd = 0 (the robot hangs limp in its gantry) for at least `zero_torque_s`, and until the
+                     operator confirms (keyboard Enter, remote START/A; --auto-start in simulation)
     RAMP_TO_DEFAULT  linear interpolation from the measured pose to default_pose over `ramp_s`, policy gains
-    HOLD             default_pose until the operator starts the policy (or --auto-start)
+    HOLD             default_pose until the operator starts the policy (same keys, or --auto-start)
     POLICY           joint targets from the policy
     DAMP             kp = 0, kd = damp_kd, hands in their safe state; terminal: the runtime exits after `damp_s`
 
-Any fault in a commanding phase goes to DAMP: body / hand state older than `max_input_age_periods` control
-periods, hand link lost or device error bits, non-finite state, measured joints beyond their limits (+ margin),
-non-finite or absurd actions (|a| > action_fault_factor * action_clip), tracker poses stale during POLICY, IMU
-and tracker disagreeing on the pelvis tilt, an e-stop or SIGINT. Targets are clamped to the joint limits and
+Any fault in a commanding phase goes to DAMP: body state older than `max_input_age_periods` control periods or
+with a frozen tick, a hand that has not answered its latest request for that long, hand link lost, device error
+bits or a reading outside its register's range, motor error bits or over-temperature, another rt/lowcmd
+publisher, a mode_machine change, non-finite state, measured joints (body and hands) beyond their limits
+(+ margin), non-finite or absurd actions (|a| > action_fault_factor * action_clip), tracker poses stale during
+POLICY, IMU and tracker disagreeing on the pelvis tilt, too many loop overruns, hands commanded below
+`min_hand_rate_share` of the loop rate, an e-stop, stop or signal. Targets are clamped to the joint limits and
 rate limited per tick (`max_target_rate` rad/s) before they are sent; a final check refuses anything outside
 the limits.
 """
@@ -58,6 +63,12 @@ class SafetyConfig:
     joint_limit_margin: float = 0.1  # rad; measured q beyond limits + margin -> DAMP
     max_tilt_mismatch_rad: float | None = 0.35  # IMU vs tracker pelvis tilt; None disables the check
     hand_wait_fraction: float = 0.3  # how long (fraction of a period) a tick waits for last tick's hand exchange
+    max_motor_temp_c: float = 90.0  # a body motor at or above this -> refuse the start / DAMP
+    max_overruns: int | None = 5  # more loop overruns than this within overrun_window_s -> DAMP (None: count only)
+    overrun_window_s: float = 1.0
+    min_hand_rate_share: float | None = 0.5  # acknowledged hand commands per s below this share of the loop rate
+    hand_rate_window_s: float = 1.0  # ... over this window -> DAMP (None: report only)
+    hand_bus_budget_share: float = 0.8  # share of a period one hand link's wire time may fill (start-up check)
 
 
 def input_faults(
@@ -82,15 +93,10 @@ def input_faults(
         if not body.is_finite():
             faults.append("body state not finite")
         else:
-            n = contract.num_body
-            margin = config.joint_limit_margin
-            beyond = (body.q < contract.joint_lower[:n] - margin) | (body.q > contract.joint_upper[:n] + margin)
-            if np.any(beyond):
-                i = int(np.argmax(beyond))
-                faults.append(f"joint limit breach: {contract.actuator_names[i]} at {body.q[i]:.3f} rad")
-    for side, stamp in zip(("left", "right"), hands.stamps, strict=True):
-        if now - stamp > max_age:
-            faults.append(f"{side} hand state stale ({(now - stamp) * 1e3:.1f} ms old)")
+            faults.extend(joint_limit_faults(np.concatenate([body.q, hands.rad]), contract, config.joint_limit_margin))
+    for side, age in zip(("left", "right"), hands.ages, strict=True):
+        if age > max_age:  # the hand's own silence since its last answered request, not the loop's lateness
+            faults.append(f"{side} hand state stale ({age * 1e3:.1f} ms without an answer)")
     faults.extend(hands.faults)
     if need_tracker:
         faults.extend(tracker_faults(now, max_age, contract, poses))
@@ -100,6 +106,12 @@ def input_faults(
             if tilt > config.max_tilt_mismatch_rad:
                 faults.append(f"IMU and tracker disagree on pelvis tilt by {np.degrees(tilt):.1f} deg")
     return faults
+
+
+def joint_limit_faults(q: np.ndarray, contract: PolicyContract, margin: float) -> list[str]:
+    """Measured joints (body, then hand channels in actuator order) beyond their limits + margin."""
+    beyond = (q < contract.joint_lower - margin) | (q > contract.joint_upper + margin)
+    return [f"joint limit breach: {contract.actuator_names[i]} at {q[i]:.3f} rad" for i in np.flatnonzero(beyond)[:1]]
 
 
 def tracker_faults(now: float, max_age: float, contract: PolicyContract, poses: TrackedPoses) -> list[str]:

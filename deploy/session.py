@@ -3,13 +3,16 @@
 Dry run (`dry_run=True`): the numpy SimulatedBody (or, with body "dds", a DDS loopback robot on `lo`), the
 SimulatedTracker, and two simulated Inspire hands speaking the chosen transport's real bytes. Hands-only bench:
 a dry run given real hand ports (or a CAN channel) uses those instead; the runtime is the same. Real run: the DDS
-body, the UDP pose receiver and real hand ports are required, and the operator starts the policy from HOLD.
+body, the UDP pose receiver and real hand ports are required, and the operator confirms twice: in ZERO_TORQUE
+(stiffen) and in HOLD (start the policy). --auto-start confirms both by itself, for dry runs; for a simulator
+reached over DDS it must name the interface (--auto-start-on IFACE), and a real body never gets it by default.
 """
 
 from __future__ import annotations
 
 import contextlib
 import json
+import logging
 import math
 import time
 from dataclasses import dataclass, field
@@ -18,16 +21,21 @@ from pathlib import Path
 from deploy._atomic import atomic_write_text
 from deploy.clock import MonotonicClock
 from deploy.contract import check_against_embodiment
-from deploy.embodiment import resolve_embodiment_path
+from deploy.embodiment import load_embodiment, resolve_embodiment_path
 from deploy.errors import BodyLinkError, DeployError, HandFaultError, HandLinkError
+from deploy.hand_budget import plan_hand_rate
 from deploy.hand_pair import Hands
 from deploy.loop import Runtime
 from deploy.motion import load_motion
 from deploy.observations import ObservationBuilder
 from deploy.operator import KeyboardOperator, OperatorInput
+from deploy.outcome import Outcome
 from deploy.policy import OnnxPolicy
 from deploy.runlog import EventLog, TickRecorder
 from deploy.safety import SafetyConfig
+from deploy.status import make_status_view
+
+log = logging.getLogger("deploy.session")
 
 HAND_TRANSPORTS = ("serial", "modbus", "can")
 
@@ -59,9 +67,11 @@ class DeployOptions:
     rate: float | None = None
     log_dir: str | None = None
     auto_start: bool = False
+    auto_start_on: str | None = None  # auto-start a non-dry-run DDS body on this interface (a simulator)
     spin_s: float = 0.001  # busy-wait the last stretch before each deadline (tight wake-ups; costs CPU)
     realtime_priority: int | None = None  # SCHED_FIFO priority for the loop thread (needs CAP_SYS_NICE)
     safety: SafetyConfig = field(default_factory=SafetyConfig)
+    status: str = "auto"  # live status line: "auto" (rich on a terminal, plain lines otherwise), "plain", "off"
 
 
 class Session(contextlib.ExitStack):
@@ -88,12 +98,12 @@ class Session(contextlib.ExitStack):
         o = self.options
         if o.hand_bus not in HAND_TRANSPORTS:
             raise DeployError(f"--hand-bus must be one of {', '.join(HAND_TRANSPORTS)}, got {o.hand_bus!r}")
-        if o.auto_start and not o.dry_run:
-            raise DeployError("--auto-start is only allowed with --dry-run; on the robot the operator starts")
+        auto_start = self._check_auto_start()
         real_hand_ports, hand_ids = self._check_hand_options()
         policy = OnnxPolicy(o.policy)
         contract = policy.contract
-        check_against_embodiment(contract, resolve_embodiment_path(o.embodiment))
+        embodiment_path = resolve_embodiment_path(o.embodiment)
+        check_against_embodiment(contract, embodiment_path)
         motion = self._motion(contract)
         rate = self._rate(contract)
         log_dir = Path(o.log_dir) if o.log_dir else Path("runs") / "deploy" / time.strftime("%Y%m%d-%H%M%S")
@@ -104,20 +114,37 @@ class Session(contextlib.ExitStack):
         tracker = self._tracker(motion)
         if o.dry_run and hasattr(body, "imu_quat_source") and hasattr(tracker, "true_robot_quat_wxyz"):
             body.imu_quat_source = tracker.true_robot_quat_wxyz  # one simulated world: IMU agrees with mocap
-        hands = self._hands(contract, real_hand_ports, hand_ids)
+        hands = self._hands(contract, real_hand_ports, hand_ids, rate)
 
         events = EventLog(self.clock, log_dir / "events.jsonl")
         self.callback(events.close)
         recorder = TickRecorder(log_dir)
         self.callback(recorder.close)
         safety = o.safety
-        if o.auto_start and safety.auto_start_after_s is None:
+        if auto_start and safety.auto_start_after_s is None:
             safety.auto_start_after_s = 0.5
-        operator = OperatorInput() if o.auto_start else KeyboardOperator()
+        operator = OperatorInput() if auto_start else KeyboardOperator()
+        status = make_status_view(o.status)
+        self.callback(status.close)
         self.runtime = Runtime(contract, policy, ObservationBuilder(contract, motion), body, tracker, hands,
                                clock=self.clock, safety=safety, operator=operator, events=events,
-                               recorder=recorder, rate_hz=rate, realtime_priority=o.realtime_priority)
+                               recorder=recorder, rate_hz=rate, realtime_priority=o.realtime_priority,
+                               expected_mode_machine=load_embodiment(embodiment_path).mode_machine, status=status)
         events.log("session", **self.description, log_dir=str(log_dir))
+        events.log("hand_budget", every_n_ticks=hands.every_n_ticks, message=self.description["hand_budget"])
+
+    def _check_auto_start(self) -> bool:
+        """--auto-start is for simulated bodies; a DDS body this process did not simulate must be named."""
+        o = self.options
+        if o.auto_start_on is not None:
+            if o.dry_run or (o.body or "dds") != "dds" or o.dds_interface != o.auto_start_on:
+                raise DeployError(f"--auto-start-on {o.auto_start_on} is for a DDS simulator on that interface: "
+                                  f"give --dds-interface {o.auto_start_on} without --dry-run")
+            return True
+        if o.auto_start and not o.dry_run:
+            raise DeployError("--auto-start is only for dry runs and simulation: on a real body the operator "
+                              "confirms (for a DDS simulator, name its interface with --auto-start-on IFACE)")
+        return o.auto_start
 
     def _motion(self, contract):
         o = self.options
@@ -215,7 +242,7 @@ class Session(contextlib.ExitStack):
             raise DeployError(f"--hand-id takes two ids (left, right), got {hand_ids}")
         return real_ports, hand_ids
 
-    def _hands(self, contract, real_ports: bool, hand_ids: list[int]) -> Hands:
+    def _hands(self, contract, real_ports: bool, hand_ids: list[int], rate: float) -> Hands:
         from deploy.hands import make_hand_bus
 
         o = self.options
@@ -223,6 +250,7 @@ class Session(contextlib.ExitStack):
         common = {"retries": o.hand_retries, "safe_pose": o.hand_safe_state}
         if o.hand_timeout is not None:
             common["timeout"] = o.hand_timeout
+        sim_options = {"channel": f"inspire-sim-{id(self):x}"} if transport == "can" else {}  # one CAN bus
         buses = []
         for i, side in enumerate(("left", "right")):
             if real_ports:
@@ -234,14 +262,19 @@ class Session(contextlib.ExitStack):
             else:
                 from deploy.hands.simulated import start_simulated_hand
 
-                sim = start_simulated_hand(transport, side, hand_id=hand_ids[i])
+                sim = start_simulated_hand(transport, side, hand_id=hand_ids[i], **sim_options)
                 self.callback(sim.stop)
                 kwargs = sim.bus_kwargs()
             buses.append(make_hand_bus(transport, side, **kwargs, **common))
         self.description["hands"] = f"{transport} ({'real ports' if real_ports else 'simulated devices'})"
+        plan = plan_hand_rate(transport, _line_rate(buses[0]), _hands_per_link(buses), rate,
+                              o.safety.hand_bus_budget_share, o.safety.min_hand_rate_share)
+        self.description["hand_budget"] = plan.message
+        if plan.every_n_ticks > 1:
+            log.warning("%s", plan.message)
         hands = Hands(buses[0], buses[1], contract.hands, clock=self.clock,
                       force_limits=[o.hand_force_limit] * 6, speeds=[o.hand_speed] * 6,
-                      safe_state=o.hand_safe_state, threaded=o.hand_threads)
+                      safe_state=o.hand_safe_state, threaded=o.hand_threads, every_n_ticks=plan.every_n_ticks)
         self.callback(hands.close)  # registered before connect: a half-connected pair is still closed
         try:
             hands.connect()
@@ -251,7 +284,17 @@ class Session(contextlib.ExitStack):
 
     # ---------------------------------------------------------------- running
     def run(self) -> dict:
-        summary = self.runtime.run(self.options.duration)
+        """Run; a crash still leaves a summary.json (outcome CRASHED) before the exception goes on."""
+        try:
+            summary = self.runtime.run(self.options.duration)
+        except Exception:
+            summary = self._with_setup(self.runtime.summary())
+            summary.update(outcome=Outcome.CRASHED.name, exit_code=Outcome.CRASHED.code)
+            self.write_summary(summary)
+            raise
+        return self._with_setup(summary)
+
+    def _with_setup(self, summary: dict) -> dict:
         summary.update({"policy": str(self.options.policy), "dry_run": self.options.dry_run,
                         "log_dir": str(self.log_dir), "setup": dict(self.description)})
         return summary
@@ -260,6 +303,16 @@ class Session(contextlib.ExitStack):
         path = self.log_dir / "summary.json"
         atomic_write_text(path, json.dumps(summary, indent=2, default=str) + "\n")
         return path
+
+
+def _line_rate(bus) -> float:
+    return float(getattr(bus, "bitrate", None) or getattr(bus, "baudrate", 115200))
+
+
+def _hands_per_link(buses) -> int:
+    """Hands on the busiest link: both on one CAN channel or one RS485 port add up."""
+    links = [getattr(b, "channel", None) or getattr(b, "port", None) or id(b) for b in buses]
+    return max(links.count(link) for link in links)
 
 
 def format_summary(summary: dict) -> str:
@@ -271,12 +324,14 @@ def format_summary(summary: dict) -> str:
     phases = ", ".join(f"{k} {v:.2f} s" for k, v in summary["phase_time_s"].items())
     hand_lines = []
     for side, st in summary["hands"].items():
+        rate = st.get("command_rate_hz")
         hand_lines.append(
-            f"{side}: {st['cycles']} cycles, {st.get('bus_retries', 0)} bus retries, {st['link_errors']} link errors, "
-            f"{st['reconnects']} reconnects, {st['fault_errors']} device faults, {st['late_cycles']} late"
+            f"{side}: {'n/a' if rate is None else f'{rate:.1f} Hz'} commanded, {st['cycles']} cycles, "
+            f"{st.get('bus_retries', 0)} bus retries, {st['link_errors']} link errors, {st['reconnects']} reconnects, "
+            f"{st['fault_errors']} device faults, {st['reading_faults']} bad readings, {st['late_cycles']} late"
         )
     rows = [
-        ("exit", summary["exit_reason"] or "-"),
+        ("exit", f"{summary['exit_reason'] or '-'}  [{summary['outcome']}, code {summary['exit_code']}]"),
         ("final phase", summary["final_phase"]),
         ("rate", f"{summary['rate_hz']:.1f} Hz"),
         ("ticks", f"{summary['ticks']} (policy {summary['policy_steps']}), overruns {summary['overruns']}, "

@@ -186,3 +186,38 @@ def test_can_error_frames_persisting_reach_damp(dev_policy):
         rig.assert_safe()
     finally:
         rig.close()
+
+
+@pytest.mark.parametrize("register,value,expected", [
+    ("ANGLE_ACT", 4000, "index ANGLE_ACT = 4000 (valid 0..1000)"),  # a firmware glitch
+    ("FORCE_ACT", -6141, "index FORCE_ACT = -6141 (valid -4000..4000)"),  # 1000 with its bytes swapped
+])
+def test_out_of_range_reading_is_a_named_fault_and_never_reaches_the_observation(real_rig, register, value,
+                                                                                   expected):
+    rig = real_rig
+    rig.to_policy()
+    rig.sims[1].override_reading(register, 3, value)
+    rig.run(0.3)
+    assert rig.runtime.phase == Phase.DAMP
+    assert any(r.startswith("right hand reading out of range") and expected in r
+               for r in rig.runtime.fault_reasons), rig.runtime.fault_reasons
+    reading = rig.hands.finish_cycle()
+    assert reading.angles.max() <= 1000 and reading.forces.min() >= -4000  # the bad value was dropped
+    rig.assert_safe()
+
+
+def test_slow_hand_replies_fall_below_the_hand_rate_share(dev_policy):
+    """Every reply 10 ms late (4 transactions a cycle): the hand is commanded far below the 50 Hz loop rate."""
+    rig = RealTimeRig(dev_policy, "serial", max_input_age_periods=50)
+    try:
+        for sim in rig.sims:
+            sim.turnaround_s = 0.010
+        rig.to_policy()
+        rig.run(1.5)
+        assert rig.runtime.phase == Phase.DAMP
+        assert any("hand commanded at" in r and "below 50% of the 50 Hz loop" in r
+                   for r in rig.runtime.fault_reasons), rig.runtime.fault_reasons
+        rates = rig.runtime.summary()["hands"]
+        assert all(entry["command_rate_hz"] < 25 for entry in rates.values())
+    finally:
+        rig.close()

@@ -56,20 +56,34 @@ def test_policy_follows_the_reference(rig):
     assert rig.runtime.policy_steps == 31
 
 
-def test_operator_start_only_from_hold(dev_policy):
+def test_operator_gates_zero_torque_and_hold(dev_policy):
     safety = SafetyConfig(zero_torque_s=0.1, ramp_s=0.3, auto_start_after_s=None, damp_s=0.2)
-    clock_start = 1000.0
-    operator_script = [(clock_start + 0.2, "start"), (clock_start + 2.0, "start")]  # during the ramp, then in HOLD
+    t0 = 1000.0
+    # confirm in ZERO_TORQUE (stiffen), a press during the ramp (ignored), then one in HOLD (start the policy)
+    script = [(t0 + 1.0, "start"), (t0 + 1.2, "start"), (t0 + 2.0, "start")]
     rig = RuntimeRig(dev_policy, safety=safety)
-    rig.runtime.operator = ScriptedOperator(rig.clock, operator_script)
+    rig.runtime.operator = ScriptedOperator(rig.clock, script)
     trace = phases_and_commands(rig, 80)
     phases = [p for p, _ in trace]
+    limp = [c for p, c in trace if p == Phase.ZERO_TORQUE]
+    assert len(limp) * rig.dt >= 1.0 - rig.dt  # held limp until the operator confirmed, long after zero_torque_s
+    assert all(np.all(c["kp"] == 0) and np.all(c["kd"] == 0) for c in limp)
     first_policy = phases.index(Phase.POLICY)
-    assert rig.clock.now() > clock_start + 2.0
-    assert first_policy * rig.dt + clock_start >= clock_start + 2.0 - rig.dt
-    assert phases[first_policy - 1] == Phase.HOLD
+    assert first_policy * rig.dt + t0 >= t0 + 2.0 - rig.dt and phases[first_policy - 1] == Phase.HOLD
     assert rig.events.of_kind("start_ignored")[0]["phase"] == "RAMP_TO_DEFAULT"
-    assert rig.events.of_kind("phase")[-1]["reason"] == "operator start"
+    reasons = [e["reason"] for e in rig.events.of_kind("phase")]
+    assert reasons[1].startswith("operator confirmed") and reasons[-1] == "operator start"
+    assert [e["phase"] for e in rig.events.of_kind("prompt")] == ["ZERO_TORQUE", "HOLD"]
+
+
+def test_zero_torque_never_ends_without_a_confirmation(dev_policy):
+    rig = RuntimeRig(dev_policy, safety=SafetyConfig(zero_torque_s=0.1, auto_start_after_s=None))
+    rig.step(int(10 / rig.dt))
+    assert rig.runtime.phase == Phase.ZERO_TORQUE and "stiffen" in rig.runtime.prompt
+    assert all(np.all(c["kp"] == 0) and np.all(c["kd"] == 0) for c in rig.body.commands)
+    rig.runtime.request_start()  # the keyboard / remote hook
+    rig.step(1)
+    assert rig.runtime.phase == Phase.RAMP_TO_DEFAULT and rig.runtime.prompt is None
 
 
 def test_estop_damps_then_exits(rig):
