@@ -25,7 +25,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--embodiment", default="g1_inspire", help="embodiment name or YAML path (default g1_inspire)")
     p.add_argument("--dry-run", action="store_true",
                    help="simulated body + tracker; simulated hands unless real hand ports are given")
-    p.add_argument("--duration", type=float, default=None, help="run this many seconds, then DAMP and exit")
+    p.add_argument("--duration", type=float, default=None, metavar="S",
+                   help="run S seconds in all, then DAMP and exit; start-up (ZERO_TORQUE 0.5 s, RAMP_TO_DEFAULT "
+                        "2.0 s, HOLD until started) counts, so the policy runs about S - 3 s (default: until Ctrl-C)")
     p.add_argument("--rate", type=float, default=None, help="loop rate in Hz (default 1/control_dt; dry runs only)")
     p.add_argument("--log-dir", default=None, help="where events.jsonl, ticks/ and summary.json go")
     p.add_argument("--auto-start", action="store_true",
