@@ -72,8 +72,8 @@ def register(subparsers) -> None:
 
 def handler(args: argparse.Namespace) -> int:
     from sim2sim.evaluate import Sim2SimOptions, evaluate
-    from sim2sim.verdict import ReadyThresholds
     from sim2sim.report import fmt_rtf
+    from sim2sim.verdict import ReadyThresholds
 
     options = Sim2SimOptions(
         policy=args.policy, motion=args.motion, clips=args.clips, suite=args.suite,

@@ -18,7 +18,12 @@ from robot_hoi.data.objects import ObjectAsset, default_objects_dir, load_object
 from robot_hoi.data.quirks import fix_quaternion_signs, fix_shifted_finger_rows, leading_placeholder_frames
 from robot_hoi.data.resample import fill_frames, fill_missing_frames
 from robot_hoi.data.scale import subject_height
-from robot_hoi.data.validate import DEFAULT_MIN_DURATION_S, clip_warnings, rotation_glitch_notes, validate_clip
+from robot_hoi.data.validate import (
+    DEFAULT_MIN_DURATION_S,
+    clip_warnings,
+    rotation_glitch_notes,
+    validate_clip,
+)
 from robot_hoi.errors import DataError, UserError
 
 
