@@ -90,12 +90,14 @@ def run(args: argparse.Namespace) -> int:
 
 
 def evaluation_settings(env_cfg, episodes: int, seed: int) -> None:
-    """Turn a training env config into the evaluation one (in place): `episodes` stand starts, no noise, no PSI."""
+    """Turn a training env config into the evaluation one (in place): `episodes` stand starts, no noise, no PSI,
+    no assist wrenches."""
     env_cfg.num_envs = episodes
     env_cfg.seed = seed
     env_cfg.init.stand_start_probability = 1.0
     env_cfg.init.spawn_noise_xy = 0.0
     env_cfg.psi.enabled = False
+    env_cfg.assist.enabled = False  # a training curriculum: never in evaluation
 
 
 def evaluate(env, model, stochastic: bool = False) -> dict[str, float]:
@@ -105,7 +107,9 @@ def evaluate(env, model, stochastic: bool = False) -> dict[str, float]:
     model runs where its parameters are, the env where its physics is: observations and actions cross over."""
     import torch
 
-    policy_device = next(model.parameters()).device
+    from robot_hoi.sim.device import module_device
+
+    policy_device = module_device(model, env.device)
     obs = env.reset()
     finished: dict[str, list[torch.Tensor]] = {}
     counted = torch.zeros(env.num_envs, dtype=torch.bool, device=env.device)

@@ -103,6 +103,12 @@ def physics_device(cfg) -> torch.device:
     return torch.device(cfg.sim_device if cfg.backend == "warp" else "cpu")
 
 
+def module_device(module: torch.nn.Module, default: torch.device | str) -> torch.device:
+    """Where a model's parameters (or buffers) are; `default` for one that holds none."""
+    tensor = next(iter([*module.parameters(), *module.buffers()]), None)
+    return torch.device(default) if tensor is None else tensor.device
+
+
 def policy_device(requested: str, env_device: torch.device | str) -> torch.device:
     """`auto`: the physics' device when it is a GPU, else this process's CUDA device when there is one, else the
     CPU; any other value as given."""

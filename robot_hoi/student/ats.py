@@ -31,7 +31,7 @@ def trackable_frames(start_frame: Tensor, clip_end: Tensor, max_episode_length: 
 class AdaptiveTrajectorySampler:
     def __init__(self, clip_start: Tensor, clip_end: Tensor, max_episode_length: int, frame_lambda: float,
                  class_lambda: float, decay: float) -> None:
-        self.clip_start, self.clip_end = clip_start.long(), clip_end.long()
+        self.clip_start, self.clip_end = clip_start.long().cpu(), clip_end.long().cpu()  # a host-side table
         self.max_episode_length = max_episode_length
         self.frame_lambda, self.class_lambda, self.decay = frame_lambda, class_lambda, decay
         total = int(clip_end[-1]) + 1

@@ -40,11 +40,12 @@ def expand_inputs(state: dict, prefix: str, extra: int, extra_mean: torch.Tensor
     normaliser statistics from a first batch of them."""
     state = dict(state)
     weight = state[f"{prefix}.0.weight"]
-    state[f"{prefix}.0.weight"] = torch.cat([weight, torch.zeros(weight.shape[0], extra)], dim=1)
+    state[f"{prefix}.0.weight"] = torch.cat([weight, weight.new_zeros(weight.shape[0], extra)], dim=1)
     norm = f"{prefix}_normalizer"
     if f"{norm}.mean" in state:
-        state[f"{norm}.mean"] = torch.cat([state[f"{norm}.mean"], extra_mean])
-        state[f"{norm}.var"] = torch.cat([state[f"{norm}.var"], extra_var])
+        mean = state[f"{norm}.mean"]
+        state[f"{norm}.mean"] = torch.cat([mean, extra_mean.to(mean.device)])
+        state[f"{norm}.var"] = torch.cat([state[f"{norm}.var"], extra_var.to(mean.device)])
     return state
 
 

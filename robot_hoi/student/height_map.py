@@ -65,8 +65,10 @@ class HeightMap:
 
     def heights(self, root_pos: Tensor, root_quat_wxyz: Tensor, object_pos: Tensor, object_quat_wxyz: Tensor
                 ) -> Tensor:
+        if self.offsets.device != root_pos.device:  # once: the grid and the hull move to the env's device
+            self.offsets, self.triangles = self.offsets.to(root_pos.device), self.triangles.to(root_pos.device)
         heading = yaw_quat(root_quat_wxyz)
-        offsets3 = torch.cat([self.offsets, torch.zeros(len(self.offsets), 1)], dim=-1)
+        offsets3 = torch.cat([self.offsets, torch.zeros(len(self.offsets), 1, device=root_pos.device)], dim=-1)
         points = quat_apply(heading[:, None], offsets3[None])[..., :2] + root_pos[:, None, :2]
         tri = quat_apply(object_quat_wxyz[:, None, None], self.triangles[None]) + object_pos[:, None, None]
         return top_surface_heights(points, tri)

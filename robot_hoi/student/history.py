@@ -43,7 +43,7 @@ def reference_features(env, reference) -> Tensor:
     state = SimpleNamespace(  # the state attributes the terms read, as InteractionEnv._update_state sets them
         num_envs=frames, device=qpos.device, root_pos=qpos[:, 0:3], root_quat=root_quat, root_ang_vel=qvel[:, 3:6],
         root_rotmat=quat_to_matrix(root_quat), heading_matrix=quat_to_matrix(yaw_quat(root_quat)),
-        joint_pos=reference.joint_pos, default_joint_pos=env.default_joint_pos,
+        joint_pos=reference.joint_pos, default_joint_pos=env.default_joint_pos.to(qpos.device),
         joint_vel=qvel[:, torch.as_tensor(lay.actuator_dof)], body_actuator_ids=env.body_actuator_ids,
         object_pos=reference.object_pos, object_quat=reference.object_quat_wxyz,
         object_rotmat=quat_to_matrix(reference.object_quat_wxyz))
@@ -132,9 +132,15 @@ class HistoryProvider:
 
     @torch.no_grad()
     def __call__(self, env, obs: dict[str, Tensor], reset: Tensor) -> Tensor:
-        current = obs["student"][:, self.index]
-        if reset is not None and bool(reset.any()):
-            self.buffer[reset] = current[reset][:, None].expand(-1, self.buffer.shape[1], -1)
+        """On the observations' device (the encoder and buffers move there once); no host sync."""
+        student = obs["student"]
+        if self.buffer.device != student.device:
+            self.encoder.to(student.device)
+            self.index, self.buffer = self.index.to(student.device), self.buffer.to(student.device)
+        current = student[:, self.index]
+        if reset is not None:
+            fresh = current[:, None].expand(-1, self.buffer.shape[1], -1)
+            self.buffer = torch.where(reset.to(student.device)[:, None, None], fresh, self.buffer)
         h = self.encoder(self.buffer)
         self.buffer = torch.cat([self.buffer[:, 1:], current[:, None]], dim=1)
         return h

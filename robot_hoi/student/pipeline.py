@@ -28,8 +28,10 @@ from pathlib import Path
 
 import torch
 
+from robot_hoi.data.cli_options import clip_options
 from robot_hoi.errors import UserError
 from robot_hoi.rl.budget import Budget, parse_budget
+from robot_hoi.sim.device import physics_device, resolve_env_cfg
 from robot_hoi.student.config import PRESETS, StudentTrainConfig, load_student_config
 from robot_hoi.student.distributed import Rank, SharedBudget, state_checksum, sum_over_ranks
 from robot_hoi.student.reference_view import ReferenceTimeline, ReferenceView
@@ -43,7 +45,6 @@ from robot_hoi.student.task import (
     write_student_task,
 )
 from robot_hoi.student.teachers import CompositeTeacher, TeacherMember, TeacherRun, load_teacher_runs
-from robot_hoi.data.cli_options import clip_options
 from robot_hoi.tasks.interaction import factory
 from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg
 from robot_hoi.utils.atomic import atomic_write_text
@@ -96,6 +97,12 @@ def prepare(args: argparse.Namespace) -> Setup:
                                               env_overrides, "--set env.*"))
     if cfg.complexmimic.enabled:
         env_cfg.terminations.max_mean_link_error = cfg.complexmimic.student_tau
+    # The physics chosen once for every env of this process (student, teacher rollouts, experts, evaluation; a
+    # data-parallel rank: its own GPU); the teachers act on those envs' observations, so they move there.
+    env_cfg = resolve_env_cfg(env_cfg)
+    teacher_env_cfg.backend, teacher_env_cfg.sim_device = env_cfg.backend, env_cfg.sim_device
+    for run in runs:
+        run.model.to(physics_device(env_cfg))
     embodiment = load_embodiment(env_cfg.embodiment)
     sources: list[str] = []
     clip_teacher: list[int] = []

@@ -89,14 +89,14 @@ def rollout_reference(env, policy: Callable[[dict[str, Tensor]], Tensor], min_fr
             break
         frame = int(env.ref_index[0]) - start
         for name, value in _env_snapshot(env).items():
-            recorded[name][frame] = value[0].clone()
+            recorded[name][frame] = value[0].cpu()  # a reference is a host object (saved, reloaded on any device)
         reached = frame + 1
     keep = reached - failure_margin if terminated else reached
     mean_reward = float(np.mean(rewards)) if rewards else 0.0
     if keep < min_frames:
         return RolloutResult(None, reached, total, terminated, mean_reward)
     stacked = {name: torch.stack(values[:keep]) for name, values in recorded.items()}
-    stacked["joint_pos"] = inside_limits(stacked["joint_pos"], env.ctrl_low, env.ctrl_high)
+    stacked["joint_pos"] = inside_limits(stacked["joint_pos"], env.ctrl_low.cpu(), env.ctrl_high.cpu())
     stacked["robot_qpos"][:, torch.as_tensor(env.layout.actuator_qpos)] = stacked["joint_pos"]
     points_world = quat_apply(stacked["object_quat_wxyz"][:, None], source.object_points[None]) + \
         stacked["object_pos"][:, None]

@@ -33,6 +33,8 @@ class StartSampler:
         return self.clip_probabilities()
 
     def plan(self, env, env_ids: Tensor) -> StartPlan:
+        """Drawn on the host (the samplers' tables are CPU tensors), handed to the env on its device."""
+        env_ids = env_ids.cpu()
         n = env_ids.numel()
         clip = torch.multinomial(self.probabilities(), n, replacement=True, generator=self.generator)
         custom = torch.zeros(n, dtype=torch.bool)
@@ -55,7 +57,9 @@ class StartSampler:
         self.records["hold"][env_ids] = hold if hold is not None else 0
         if self.masked_left is not None:
             self.masked_left[env_ids] = hold if hold is not None else 0
-        return StartPlan(clip=clip, custom=custom, state=state, frame=frame, hold=hold)
+        on_env = lambda t: None if t is None else t.to(env.device)  # noqa: E731
+        return StartPlan(clip=on_env(clip), custom=on_env(custom), state=on_env(state), frame=on_env(frame),
+                         hold=on_env(hold))
 
     def state_dict(self) -> dict:
         return {"generator": self.generator.get_state()}

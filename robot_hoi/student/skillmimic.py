@@ -81,7 +81,8 @@ class SkillMimicSetup:
             runner.stateful["ats"] = ats
         graph = None
         if cfg.stf and cfg.stitching and len(env.references) > 1:
-            graph = StitchedGraph(reference_track(env), env.ref_robot_qpos[:, :2], env.clip_start, env.clip_end, cfg)
+            graph = StitchedGraph(reference_track(env), env.ref_robot_qpos[:, :2].cpu(), env.clip_start.cpu(),
+                                  env.clip_end.cpu(), cfg)
             edges = {c: graph.num_edges(c) for c in range(len(env.references))}
             print(f"[skillmimic] stitched trajectory graph: connections per clip {edges}")
         field = StateTransitionField(env, cfg, self.generator, ats, graph)

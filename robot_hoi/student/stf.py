@@ -90,7 +90,7 @@ class StateLayout:
     def of(cls, env) -> StateLayout:
         lay = env.layout
         return cls(lay.robot_nq, lay.robot_nv, torch.as_tensor(lay.actuator_qpos), torch.as_tensor(lay.actuator_dof),
-                   env.ctrl_low, env.ctrl_high)
+                   env.ctrl_low.cpu(), env.ctrl_high.cpu())
 
     @property
     def object(self) -> int:
@@ -204,7 +204,7 @@ class StateTransitionField:
         self.cfg, self.generator, self.ats, self.graph = cfg, generator, ats, graph
         self.layout = StateLayout.of(env)
         self.kinematics = LinkKinematics(env)
-        self.clip_start, self.clip_end = env.clip_start.long(), env.clip_end.long()
+        self.clip_start, self.clip_end = env.clip_start.long().cpu(), env.clip_end.long().cpu()
         self.states = reference_states(env)
         self.track = reference_track(env)
 
@@ -267,10 +267,11 @@ class StateTransitionField:
 
 
 def reference_states(env) -> Tensor:
-    """Every reference frame as a start state (current_states layout, object angular velocity in world axes)."""
+    """Every reference frame as a start state (current_states layout, object angular velocity in world axes), on
+    the host like every table of the start samplers."""
     return torch.cat([env.ref_robot_qpos, env.ref_robot_qvel, env.ref_object_pos, env.ref_object_quat,
-                      env.ref_object_lin_vel, env.ref_object_ang_vel], dim=1)
+                      env.ref_object_lin_vel, env.ref_object_ang_vel], dim=1).cpu()
 
 
 def reference_track(env) -> KinematicTrack:
-    return KinematicTrack(env.ref_link_pos, env.ref_joint_pos, env.ref_object_pos)
+    return KinematicTrack(env.ref_link_pos.cpu(), env.ref_joint_pos.cpu(), env.ref_object_pos.cpu())

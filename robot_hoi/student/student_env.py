@@ -50,8 +50,8 @@ class StudentEnv:
         self.num_envs, self.num_actions = env.num_envs, env.num_actions
         self.device, self.max_episode_length = env.device, env.max_episode_length
         self.obs_dims = {**env.obs_dims, **{name: int(p.dim) for name, p in self.providers.items()}}
-        self._returns = torch.zeros(env.num_envs)
-        self._lengths = torch.zeros(env.num_envs, dtype=torch.long)
+        self._returns = torch.zeros(env.num_envs, device=env.device)
+        self._lengths = torch.zeros(env.num_envs, dtype=torch.long, device=env.device)
 
     def __getattr__(self, name: str) -> Any:
         return getattr(self.env, name)
@@ -65,13 +65,15 @@ class StudentEnv:
         obs = self.env.reset()
         self._returns.zero_()
         self._lengths.zero_()
-        return self._augment(obs, torch.ones(self.num_envs, dtype=torch.bool))
+        return self._augment(obs, torch.ones(self.num_envs, dtype=torch.bool, device=self.device))
 
     def step(self, actions: Tensor):
+        """The env's step with the options' bookkeeping on the env's device; only listeners (host-side samplers)
+        read episodes back, as CPU tensors."""
         sampler = self.env.start_sampler
         masked = None
         if sampler is not None and getattr(sampler, "masked_left", None) is not None:
-            masked = sampler.masked_left > 0
+            masked = (sampler.masked_left > 0).to(self.device)
             sampler.masked_left.sub_(1).clamp_(min=0)  # before the step: resets inside it write fresh counts
         records = {k: v.clone() for k, v in getattr(sampler, "records", {}).items()} if self.listeners else {}
         obs, reward, terminated, truncated, extras = self.env.step(actions)
@@ -81,14 +83,14 @@ class StudentEnv:
         self._returns += reward
         self._lengths += 1
         done = terminated | truncated
-        if bool(done.any()):
-            if self.listeners:
-                batch = EpisodeBatch(
-                    clip=extras["episode"]["clip_id"].long(), success=extras["episode"]["success"],
-                    ret=self._returns[done].clone(), length=self._lengths[done].clone(),
-                    start={k: v[done] for k, v in records.items()})
-                for listener in self.listeners:
-                    listener(batch)
-            self._returns[done] = 0.0
-            self._lengths[done] = 0
+        if self.listeners and bool(done.any()):
+            host_done = done.cpu()
+            batch = EpisodeBatch(
+                clip=extras["episode"]["clip_id"].long().cpu(), success=extras["episode"]["success"].cpu(),
+                ret=self._returns[done].cpu(), length=self._lengths[done].cpu(),
+                start={k: v[host_done] for k, v in records.items()})
+            for listener in self.listeners:
+                listener(batch)
+        self._returns.masked_fill_(done, 0.0)
+        self._lengths.masked_fill_(done, 0)
         return self._augment(obs, done), reward, terminated, truncated, extras

@@ -21,23 +21,19 @@ STUDENT_GROUP = "student"
 
 
 def evaluation_cfg(env_cfg: InteractionEnvCfg, num_envs: int, seed: int = 0) -> InteractionEnvCfg:
-    """As `robot-hoi eval`: every episode from the stand at the clip start, no spawn noise, no PSI."""
+    """As `robot-hoi eval`: every episode from the stand at the clip start, no spawn noise, no PSI, no assist."""
+    from robot_hoi.rl.eval_cli import evaluation_settings
+
     cfg = copy.deepcopy(env_cfg)
-    cfg.num_envs = num_envs
-    cfg.seed = seed
-    cfg.init.stand_start_probability = 1.0
-    cfg.init.spawn_noise_xy = 0.0
-    cfg.psi.enabled = False
+    evaluation_settings(cfg, num_envs, seed)
     return cfg
 
 
 def student_env_cfg(env_cfg: InteractionEnvCfg) -> InteractionEnvCfg:
-    """The teachers' env config with the deployable observation group switched on. The student's env runs on
-    the CPU backend unless asked otherwise (its teachers and samplers keep CPU tensors)."""
+    """The teachers' env config with the deployable observation group switched on."""
     cfg = copy.deepcopy(env_cfg)
-    if cfg.backend == "auto":
-        cfg.backend = "cpu"
     cfg.student_obs_terms = tuple(STUDENT_TERMS)
+    cfg.assist.enabled = False  # the teachers' curriculum; the student learns from teachers that no longer need it
     return cfg
 
 

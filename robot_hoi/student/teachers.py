@@ -19,6 +19,7 @@ from torch import Tensor
 from robot_hoi.errors import UserError
 from robot_hoi.rl.config import TrainConfig
 from robot_hoi.rl.models import ActorCritic
+from robot_hoi.sim.device import module_device
 from robot_hoi.student.reference_view import ReferenceView
 from robot_hoi.student.student_env import ObservationProvider
 
@@ -147,9 +148,10 @@ class TeacherMember:
         return StudentEnv(env, {g: self.extra_groups[g] for g in self.obs_groups if g != "policy"})
 
     def rollout_policy(self, wrapped_env) -> Callable[[dict[str, Tensor]], Tensor]:
-        """Deterministic actions from observation dicts of `own_env(...)`."""
-        groups = list(self.obs_groups)
-        return lambda obs: self.model.act_inference(torch.cat([obs[g] for g in groups], dim=-1))
+        """Deterministic actions (on the env's device) from observation dicts of `own_env(...)`."""
+        groups, device = list(self.obs_groups), module_device(self.model, wrapped_env.device)
+        return lambda obs: self.model.act_inference(
+            torch.cat([obs[g] for g in groups], dim=-1).to(device)).to(wrapped_env.device)
 
     def evaluate(self, env) -> dict[str, float]:
         """robot-hoi eval's metrics in `env` (its own reference, evaluation settings)."""
@@ -170,24 +172,37 @@ class CompositeTeacher:
         self.clip_teacher = torch.as_tensor(clip_teacher, dtype=torch.long)
 
     def route(self, clip_id: Tensor) -> Tensor:
+        if self.clip_teacher.device != clip_id.device:
+            self.clip_teacher = self.clip_teacher.to(clip_id.device)  # once: the index lives where the env is
         return self.clip_teacher[clip_id]
 
     @torch.no_grad()
     def act(self, env) -> tuple[Tensor, Tensor, Tensor]:
-        """Teacher means and stds in the env's action parametrisation, and which teacher answered each row."""
+        """Teacher means and stds in the env's action parametrisation (on the env's device), and which teacher
+        answered each row. One teacher answers every row without a host sync; several pick their rows."""
         which = self.route(env.clip_id)
-        mean = torch.zeros(env.num_envs, env.num_actions)
-        std = torch.ones(env.num_envs, env.num_actions)
         env_offset = env.action_offset()
         scale = env.action_scale
         cache: dict[tuple[int, str], Tensor] = {}
+        if len(self.members) == 1:
+            mean, std = self._answer(self.members[0], cache, env_offset, scale, None)
+            return mean, std.expand(env.num_envs, -1), which
+        mean = torch.zeros(env.num_envs, env.num_actions, device=env.device)
+        std = torch.ones(env.num_envs, env.num_actions, device=env.device)
         for t, member in enumerate(self.members):
             rows = (which == t).nonzero().flatten()
-            if rows.numel() == 0:
-                continue
-            obs = member.observation(cache)[rows]
-            action = member.model.act_inference(obs)
-            target = member.view.action_offset(member.action_offset)[rows] + scale * action
-            mean[rows] = (target - env_offset[rows]) / scale
-            std[rows] = member.model.action_std.expand(rows.numel(), -1)
+            if rows.numel():
+                mean[rows], std[rows] = self._answer(member, cache, env_offset[rows], scale, rows)
         return mean, std, which
+
+    @staticmethod
+    def _answer(member: TeacherMember, cache, env_offset: Tensor, scale: Tensor, rows: Tensor | None):
+        """(mean, std) of `member` for `rows` (None: all), in the env's action parametrisation."""
+        obs = member.observation(cache)
+        obs = obs if rows is None else obs[rows]
+        action = member.model.act_inference(obs.to(module_device(member.model, obs.device))).to(env_offset.device)
+        offset = member.view.action_offset(member.action_offset)
+        target = (offset if rows is None else offset[rows]) + scale * action
+        std = member.model.action_std.to(env_offset.device).expand(action.shape[0], -1)
+        return (target - env_offset) / scale, std
+

@@ -81,6 +81,8 @@ def test_start_sampler_draws_clips_with_the_given_probabilities():
     sampler = StartSampler(8, 2, torch.Generator().manual_seed(0), lambda: torch.tensor([0.9, 0.1]))
 
     class Env:
+        device = torch.device("cpu")
+
         class cfg:
             class init:
                 stand_start_probability = 0.3
