@@ -1,0 +1,203 @@
+"""Reward terms on mock envs (types.SimpleNamespace holding the few attributes a term reads) with hand-computed
+values, the two aggregations, and the reward sets of configs/tasks/rewards (issue 14: squared errors, feet weight,
+anchor-relative terms, reward_mode product | sum). All of this is new in ab3d4d8: against the code before it the
+terms do not exist (KeyError / AttributeError) and aggregate() has no mode.
+"""
+
+from __future__ import annotations
+
+import math
+from types import SimpleNamespace
+
+import pytest
+import torch
+
+from robot_hoi.tasks.interaction.mdp import rewards as R
+from robot_hoi.utils.torch_rot import quat_from_yaw, quat_to_matrix
+
+F64 = torch.float64
+
+
+def _quat_x(angle: float) -> torch.Tensor:
+    return torch.tensor([math.cos(angle / 2), math.sin(angle / 2), 0.0, 0.0], dtype=F64)
+
+
+def _identity(*shape) -> torch.Tensor:
+    q = torch.zeros(*shape, 4, dtype=F64)
+    q[..., 0] = 1.0
+    return q
+
+
+# 6 links: 0 pelvis, 1 knee, 2-3 feet, 4-5 hand (wrist, fingertip); 5 actuators, the first 3 of the body
+SCENE = SimpleNamespace(body_link_ids=[0, 1, 2, 3], feet_link_ids=[2, 3], hand_link_flat_ids=[4, 5])
+REF_LINKS = torch.tensor([[0.0, 0.0, 0.8], [0.1, 0.1, 0.4], [0.0, 0.1, 0.05], [0.0, -0.1, 0.05],
+                          [0.3, 0.2, 0.9], [0.4, 0.2, 0.9]], dtype=F64)
+
+
+def _env(**fields) -> SimpleNamespace:
+    """One env on a reference at the origin; `fields` override the simulated side (batch of 1 unless given)."""
+    ref = SimpleNamespace(link_pos=REF_LINKS[None].clone(), root_pos=REF_LINKS[None, 0].clone(),
+                          root_quat_wxyz=_identity(1), link_quat_wxyz=_identity(1, 6), joint_pos=torch.zeros(1, 5,
+                          dtype=F64), object_pos=torch.tensor([[0.6, 0.0, 0.15]], dtype=F64),
+                          object_quat_wxyz=_identity(1), d_hat=torch.zeros(1, 6, 3, dtype=F64))
+    env = SimpleNamespace(ref=ref, scene=SCENE, body_actuator_ids=[0, 1, 2], link_pos=ref.link_pos.clone(),
+                          root_pos=ref.root_pos.clone(), root_quat=_identity(1), link_quat=_identity(1, 6),
+                          joint_pos=torch.zeros(1, 5, dtype=F64), heading_matrix=torch.eye(3, dtype=F64)[None],
+                          ref_heading_matrix=torch.eye(3, dtype=F64)[None], object_pos=ref.object_pos.clone(),
+                          object_quat=_identity(1), d=torch.zeros(1, 6, 3, dtype=F64),
+                          w_d=torch.tensor([[0.5, 0.1, 0.0, 0.0, 0.4, 0.0]], dtype=F64),
+                          feet_link_mask=torch.tensor([0.0, 0.0, 1.0, 1.0, 0.0, 0.0], dtype=F64))
+    for key, value in fields.items():
+        setattr(env, key, value)
+    return env
+
+
+def _offsets(*rows) -> torch.Tensor:
+    return torch.tensor(rows, dtype=F64)[None]
+
+
+# ---- the anchor-relative terms -------------------------------------------------------------------------------------
+def test_root_position_cost():
+    env = _env(root_pos=torch.tensor([[0.1, -0.2, 0.7]], dtype=F64))
+    assert R.root_position_cost(env).item() == pytest.approx(0.01 + 0.04 + 0.01)
+    assert R.root_position_cost(_env()).item() == 0.0
+
+
+def test_root_orientation_cost():
+    yawed = _env(root_quat=quat_from_yaw(torch.tensor([0.3], dtype=F64)))
+    assert R.root_orientation_cost(yawed).item() == pytest.approx(0.09)  # heading counts, squared
+    tilted = _env(root_quat=_quat_x(0.5)[None])
+    assert R.root_orientation_cost(tilted).item() == pytest.approx(0.25)
+
+
+def test_body_position_cost_is_anchor_relative():
+    """Link positions relative to the pelvis, each side in its own heading frame, mean over the body links
+    (hands excluded): the same pose elsewhere and turned by 90 degrees costs 0; a knee 0.2 m off costs 0.04 / 4."""
+    yaw = torch.tensor([math.pi / 2], dtype=F64)
+    heading = quat_to_matrix(quat_from_yaw(yaw))  # (1, 3, 3)
+    anchor = torch.tensor([1.0, 2.0, 0.0], dtype=F64)
+    moved = (REF_LINKS - REF_LINKS[0]) @ heading[0].T + REF_LINKS[0] + anchor  # turned about the pelvis, moved
+    moved[4:] += 1.0  # hands anywhere: not part of the body term
+    env = _env(link_pos=moved[None].clone(), root_pos=moved[None, 0].clone(), heading_matrix=heading)
+    assert R.body_position_cost(env).item() == pytest.approx(0.0, abs=1e-12)
+    knee_off = moved.clone()
+    knee_off[1] += heading[0] @ torch.tensor([0.2, 0.0, 0.0], dtype=F64)  # 0.2 m forward in the robot's heading
+    env.link_pos = knee_off[None]
+    assert R.body_position_cost(env).item() == pytest.approx(0.04 / 4)
+
+
+def test_body_rotation_cost():
+    quats = torch.stack([_quat_x(a) for a in (0.1, 0.2, 0.3, 0.4, 1.0, 1.0)])[None]  # hands excluded
+    assert R.body_rotation_cost(_env(link_quat=quats)).item() == pytest.approx((0.01 + 0.04 + 0.09 + 0.16) / 4)
+
+
+def test_feet_position_cost():
+    offsets = _offsets([0.5, 0, 0], [0.5, 0, 0], [0.1, 0, 0], [0, 0.2, 0.2], [1, 0, 0], [1, 0, 0])
+    assert R.feet_position_cost(_env(link_pos=REF_LINKS + offsets)).item() == pytest.approx((0.01 + 0.08) / 2)
+
+
+def test_hand_position_cost():
+    offsets = _offsets([0.5, 0, 0], [0.5, 0, 0], [0.5, 0, 0], [0.5, 0, 0], [0, 0.3, 0], [0, 0, -0.1])
+    assert R.hand_position_cost(_env(link_pos=REF_LINKS + offsets)).item() == pytest.approx((0.09 + 0.01) / 2)
+
+
+def test_joint_position_cost():
+    env = _env(joint_pos=torch.tensor([[0.1, -0.2, 0.3, 5.0, 5.0]], dtype=F64))  # finger channels excluded
+    assert R.joint_position_cost(env).item() == pytest.approx((0.01 + 0.04 + 0.09) / 3)
+
+
+# ---- squared errors and the feet weight of the InterMimic terms ---------------------------------------------------
+def test_link_position_cost_squared_and_feet_weight():
+    """w_d = (0.5, 0.1, 0, 0, 0.4, 0), errors 0.1 .. 0.6 m: unsquared <w_d, e>; squared <w_d, e^2>; feet_weight
+    0.25 adds 0.25 to each foot's weight and renormalises (total 1.5)."""
+    errors = [0.1, 0.2, 0.3, 0.4, 0.5, 0.6]
+    env = _env(link_pos=REF_LINKS + _offsets(*[[0.0, 0.0, e] for e in errors]))
+    assert R.link_position_cost(env).item() == pytest.approx(0.05 + 0.02 + 0.2)
+    assert R.link_position_cost(env, squared=True).item() == pytest.approx(0.005 + 0.004 + 0.1)
+    expected = (0.5 * 0.01 + 0.1 * 0.04 + 0.25 * 0.09 + 0.25 * 0.16 + 0.4 * 0.25) / 1.5
+    assert R.link_position_cost(env, squared=True, feet_weight=0.25).item() == pytest.approx(expected)
+    # a uniform 10 cm error: exp(-10 * 0.01) = 0.90 with the code's lambda 10, exp(-30 * 0.1) = 0.05 unsquared
+    uniform = _env(link_pos=REF_LINKS + 0.1 * torch.tensor([[[1.0, 0.0, 0.0]]], dtype=F64))
+    assert math.exp(-10 * R.link_position_cost(uniform, squared=True, feet_weight=0.25).item()) == \
+        pytest.approx(0.905, abs=1e-3)
+    assert math.exp(-30 * R.link_position_cost(uniform).item()) == pytest.approx(0.0498, abs=1e-4)
+
+
+def test_interaction_and_object_costs_squared():
+    d = torch.zeros(1, 6, 3, dtype=F64)
+    d[0, 0, 0], d[0, 4, 1] = 0.2, 0.1  # |d_hat - d| = 0.2 (w 0.5) and 0.1 (w 0.4)
+    env = _env(d=d, object_pos=torch.tensor([[0.9, 0.4, 0.15]], dtype=F64),
+               object_quat=quat_from_yaw(torch.tensor([0.5], dtype=F64)))
+    assert R.interaction_geometry_cost(env).item() == pytest.approx(0.5 * 0.2 + 0.4 * 0.1)
+    assert R.interaction_geometry_cost(env, squared=True).item() == pytest.approx(0.5 * 0.04 + 0.4 * 0.01)
+    assert R.object_position_cost(env).item() == pytest.approx(0.5)
+    assert R.object_position_cost(env, squared=True).item() == pytest.approx(0.25)
+    assert R.object_rotation_cost(env).item() == pytest.approx(0.5)
+    assert R.object_rotation_cost(env, squared=True).item() == pytest.approx(0.25)
+
+
+def test_new_terms_are_registered():
+    for name in ("root_position_cost", "root_orientation_cost", "body_position_cost", "body_rotation_cost",
+                 "feet_position_cost", "hand_position_cost", "joint_position_cost"):
+        assert R.REWARD_TERMS[name] is getattr(R, name)
+
+
+# ---- aggregation ---------------------------------------------------------------------------------------------------
+def test_aggregate_product_and_sum():
+    costs = {"a": torch.tensor([1.0, 0.0]), "b": torch.tensor([0.5, 2.0])}
+    weights, scales = {"a": 2.0, "b": 1.0}, {"a": 1.0, "b": 3.0}
+    exp_a, exp_b = torch.exp(-2.0 * costs["a"]), torch.exp(-costs["b"])
+    reward, per_term = R.aggregate(costs, weights, "product", scales)  # scales ignored
+    assert torch.allclose(reward, torch.exp(-(2.0 * costs["a"] + costs["b"])))
+    assert torch.allclose(per_term["a"], exp_a) and torch.allclose(per_term["b"], exp_b)
+    assert torch.allclose(R.aggregate(costs, weights)[0], reward)  # product is the default
+    reward, per_term = R.aggregate(costs, weights, "sum", scales)
+    assert torch.allclose(reward, (1.0 * exp_a + 3.0 * exp_b) / 4.0)
+    assert torch.allclose(per_term["b"], exp_b)
+    assert torch.allclose(R.aggregate(costs, weights, "sum")[0], (exp_a + exp_b) / 2)  # no scales: the mean
+    with pytest.raises(ValueError):
+        R.aggregate(costs, weights, "max")
+
+
+# ---- the reward sets ------------------------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def scene():
+    from robot_hoi.data.objects import box_asset
+    from robot_hoi.embodiment import load_embodiment
+    from robot_hoi.tasks.interaction.scene_setup import InteractionScene
+
+    return InteractionScene(load_embodiment("g1_inspire"), box_asset((0.4, 0.4, 0.3)))
+
+
+def test_reward_sets_load_and_build_an_env(scene):
+    """Every configs/tasks/rewards/*.yaml goes through apply_reward_set into an env that steps: rewards in [0, 1],
+    one logged exp per enabled term, the set's mode. A standing robot on a standing reference scores well."""
+    from robot_hoi.errors import UserError
+    from robot_hoi.tasks.interaction.env import InteractionEnv
+    from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg, apply_reward_set, reward_set_names
+
+    from .test_interaction_env import standing_reference
+
+    names = reward_set_names()
+    assert {"anchor_additive", "intermimic_code", "intermimic_paper"} <= set(names)
+    reference = standing_reference(scene, 10)
+    for name in names:
+        cfg = InteractionEnvCfg(num_envs=2, nthread=1, seed=0, backend="cpu")
+        cfg.psi.enabled = False
+        cfg.init.joint_noise = 0.0
+        cfg.init.stand_start_probability = 0.0
+        cfg.init.start_range = (0.0, 0.0)
+        apply_reward_set(cfg, name)
+        assert cfg.reward_mode in ("product", "sum")
+        enabled = {k for k, v in cfg.rewards.items() if v is not None}
+        assert enabled and all(cfg.rewards[k].func in R.REWARD_TERMS for k in enabled)
+        env = InteractionEnv(cfg, scene, [reference])
+        for _ in range(2):
+            _, reward, terminated, _, _ = env.step(torch.zeros(2, env.num_actions))
+            assert torch.isfinite(reward).all() and ((reward >= 0) & (reward <= 1)).all(), name
+            assert not terminated.any()
+        assert set(env.episode_sums) == enabled
+        if cfg.reward_mode == "sum":
+            assert reward.min() > 0.5, name
+    with pytest.raises(UserError):
+        apply_reward_set(InteractionEnvCfg(), "no_such_set")

@@ -1,0 +1,136 @@
+"""One termination implementation (robot_hoi/termination.py) for the training env (torch) and sim2sim (numpy).
+
+Regression tests of issue 14 item 3: sim2sim's contact-lost check had no contact tolerance, unlike training
+(the logic existed twice and had drifted). Both tests fail on the code before ab16be1: the monitor test by
+terminating with "contact_lost" (old monitor: need & ~touching, no distance), the parity test because
+robot_hoi.termination did not exist.
+"""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import mujoco
+import numpy as np
+import pytest
+import torch
+
+LINKS = ["pelvis", "left_wrist_yaw_link", "L_index_tip", "right_wrist_yaw_link", "R_index_tip"]
+
+
+class _World:
+    """What EpisodeMonitor.on_policy_step reads of a SimWorld: a floating base at 0.8 m, five links, a flat object
+    face (a 1 cm grid on x = 0, |y|, |z| <= 5 cm) at the origin, and no touch sensor reporting contact."""
+
+    def __init__(self, links: np.ndarray):
+        self.model = mujoco.MjModel.from_xml_string(
+            "<mujoco><worldbody><body><freejoint/><geom size='0.1'/></body></worldbody></mujoco>")
+        self.data = mujoco.MjData(self.model)
+        self.data.qpos[2] = 0.8
+        self.layout = SimpleNamespace(links=SimpleNamespace(names=LINKS))
+        self.links = links
+        self.t, self.pd_ticks, self.torque_saturated_updates, self.gantry_on = 0.0, 0, 0, False
+
+    def link_positions(self):
+        return self.links.copy()
+
+    def object_frame(self):
+        return np.zeros(3), np.eye(3)
+
+    def hand_contact(self):
+        return np.zeros(2, dtype=bool)
+
+
+def _face_points() -> np.ndarray:
+    grid = np.round(np.arange(-0.05, 0.0501, 0.01), 3)
+    return np.array([(0.0, y, z) for y in grid for z in grid])
+
+
+def _run_monitor(left_wrist_gap: float, ticks: int, max_frames: int = 3):
+    """EpisodeMonitor over `ticks` policy steps, the left hand required to touch, its wrist `left_wrist_gap` in
+    front of the face, the robot exactly on its reference. Returns the monitor."""
+    from sim2sim.monitor import EpisodeMonitor, ReferenceTrack, Thresholds
+
+    links = np.array([[-0.5, 0.0, 0.0], [-left_wrist_gap, 0.0, 0.0], [-0.08, 0.03, 0.0],
+                      [-0.3, -0.3, 0.0], [-0.3, -0.35, 0.0]])
+    frames = ticks + 1
+    motion = SimpleNamespace(link_pos=np.repeat(links[None], frames, 0),
+                             object_pos=np.zeros((frames, 3)),
+                             object_quat_wxyz=np.repeat(np.array([[1.0, 0.0, 0.0, 0.0]]), frames, 0))
+    need = np.zeros((frames, 2), dtype=bool)
+    need[:, 0] = True
+    ref = ReferenceTrack.build(motion, _face_points(), need)
+    monitor = EpisodeMonitor(_World(links), ref, Thresholds(max_contact_loss_frames=max_frames),
+                             last_frame=frames + 10, keep_qpos=False)
+    for tick in range(1, ticks + 1):
+        monitor.on_policy_step(tick)
+    return monitor
+
+
+def test_sim2sim_contact_check_honours_the_tolerance():
+    """A required hand 1 cm off the object surface keeps its contact (training's contact_tolerance, 2 cm); 5 cm off
+    it is lost after max_contact_loss_frames + 1 policy steps, as in training.
+
+    Old: sim2sim counted every step without touch as a miss: the 1 cm hand ended the episode after 4 steps."""
+    near = _run_monitor(0.01, ticks=10)
+    assert not near.finished and near.terminations == []
+    assert near.contact_loss.tolist() == [0, 0]
+    far = _run_monitor(0.05, ticks=10)
+    assert far.terminations == ["contact_lost"]
+    assert far.ticks[-1] == 4  # counts 1, 2, 3, 4 > 3
+
+
+def test_termination_functions_agree_on_numpy_and_torch():
+    """Every robot_hoi.termination function, on the same random inputs as float64 numpy arrays and torch tensors,
+    gives the same values (the env calls them on tensors, sim2sim on arrays)."""
+    from robot_hoi import termination as T
+
+    rng = np.random.default_rng(0)
+    n, links, points = 7, 27, 40
+    link_pos = rng.normal(size=(n, links, 3))
+    ref_link_pos = link_pos + 0.3 * rng.normal(size=(n, links, 3))
+    pts, ref_pts = rng.normal(size=(n, points, 3)), rng.normal(size=(n, points, 3))
+    d, d_hat = rng.normal(size=(n, links, 3)), rng.normal(size=(n, links, 3))
+    d[0, 3] = 0.0  # a link exactly on the surface: the 1e-4 floor of w_d
+    count = rng.integers(0, 5, size=(n, 2))
+    need, touching = rng.random((n, 2)) < 0.7, rng.random((n, 2)) < 0.3
+    nearest = rng.uniform(0.0, 0.05, size=(n, 2))
+    root_height = rng.uniform(0.0, 1.0, size=n)
+    th = T.Thresholds(max_mean_link_error=0.45, max_contact_loss_frames=3)
+
+    def both(fn, *args, **kw):
+        a = fn(*args, **kw)
+        b = fn(*[torch.as_tensor(x) if isinstance(x, np.ndarray) else x for x in args], **kw)
+        if isinstance(a, dict):
+            assert a.keys() == b.keys()
+            for key in a:
+                np.testing.assert_array_equal(np.asarray(a[key]), b[key].numpy(), err_msg=key)
+        else:
+            np.testing.assert_allclose(np.asarray(a), b.numpy(), rtol=1e-12, atol=1e-12)
+        return a
+
+    w = both(T.interaction_weights, d, d_hat)
+    np.testing.assert_allclose(w.sum(-1), 1.0)
+    link_err = both(T.mean_link_error, link_pos, ref_link_pos)
+    obj_err = both(T.mean_object_point_error, pts, ref_pts)
+    inter_err = both(T.interaction_distance_error, w, d, d_hat)
+    both(T.norm, d)
+    loss = both(T.contact_loss_count, count, need, touching, nearest, 0.02)
+    assert loss.dtype.kind == "i"
+    np.testing.assert_array_equal(loss, np.where(need & ~touching & (nearest >= 0.02), count + 1, 0))
+    reasons = both(T.reasons, th, link_err, root_height, obj_err, inter_err, loss)
+    assert reasons["contact_lost"].tolist() == (loss.max(-1) > 3).tolist()
+    # one env at a time, as sim2sim calls it (scalars and a (2,) count)
+    for i in range(n):
+        one = T.reasons(th, np.float64(link_err[i]), root_height[i], np.float64(obj_err[i]),
+                        np.float64(inter_err[i]), loss[i])
+        assert {k: bool(v) for k, v in one.items()} == {k: bool(v[i]) for k, v in reasons.items()}
+
+
+def test_env_and_sim2sim_share_the_thresholds():
+    """The env's TerminationCfg is the sim2sim monitor's Thresholds (one definition, with contact_tolerance)."""
+    from robot_hoi.tasks.interaction.env_cfg import TerminationCfg
+    from sim2sim.monitor import Thresholds
+
+    assert TerminationCfg is Thresholds
+    assert Thresholds().contact_tolerance == pytest.approx(0.02)
