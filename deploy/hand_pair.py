@@ -152,8 +152,13 @@ class HandSide:
         return 0.0 if self.stamp >= self.asked_at else now - self.asked_at
 
     def command_rate(self, now: float, window_s: float) -> float:
-        """Acknowledged ANGLE_SET commands per second over the last window_s."""
-        return sum(1 for t in self.command_times if t > now - window_s) / window_s
+        """Acknowledged ANGLE_SET commands per second over the last window_s (newest first: O(rate x window))."""
+        count = 0
+        for t in reversed(self.command_times):
+            if t <= now - window_s:
+                break
+            count += 1
+        return count / window_s
 
     def _safe_units(self) -> np.ndarray | None:
         if self.safe_state == "open":

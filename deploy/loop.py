@@ -110,7 +110,7 @@ class Runtime:
         self.needs_tracker = contract.uses_reference or contract.uses_object
         self.shaper = TargetShaper(contract, self.dt, self.safety.max_target_rate)
         self.timing = LoopTiming(self.dt, self.safety.max_overruns, self.safety.overrun_window_s)
-        self.ticks_watch = TickWatch(self.safety.max_input_age_periods * self.dt)
+        self.tick_watch = TickWatch(self.safety.max_input_age_periods * self.dt)
         self.remote = RemotePresses()
 
         self.phase = Phase.WAIT_STATE
@@ -207,7 +207,7 @@ class Runtime:
             return [], []
         identity = identity_faults(body, self.contract.actuator_names, self.expected_mode_machine,
                                    self.safety.max_motor_temp_c)
-        tick = self.ticks_watch.fault(body, now)
+        tick = self.tick_watch.fault(body, now)
         return identity, [tick] if tick else []
 
     def _hand_rate_fault(self, now: float) -> list[str]:

@@ -174,3 +174,36 @@ def test_rich_status_on_a_terminal(dev_policy):
         shown = os.read(master, 1 << 16).decode(errors="replace")
     os.close(master)
     assert "HOLD" in shown and "POLICY" in shown and "faults none" in shown
+
+
+def test_slcan_stream_garbled_mid_policy_damps_with_a_summary_not_a_traceback(dev_policy, tmp_path, capsys):
+    """Both hands behind one emulated slcan USB adapter (hands bench: real ports, body simulated)."""
+    from deploy.hands.sim_slcan import SimulatedSlcanAdapter
+    from deploy.hands.simulated import start_simulated_hand
+
+    left = start_simulated_hand("can", "left", hand_id=1)
+    right = start_simulated_hand("can", "right", hand_id=2, channel=left.channel)
+    adapter = SimulatedSlcanAdapter(left.channel)
+    events = tmp_path / "events.jsonl"
+    try:
+        import threading
+
+        def garble_once_policy_runs():
+            deadline = time.monotonic() + 40
+            while time.monotonic() < deadline and not (events.is_file() and '"to": "POLICY"' in events.read_text()):
+                time.sleep(0.05)
+            adapter.garble_next(10_000)
+
+        threading.Thread(target=garble_once_policy_runs, daemon=True).start()
+        code = deploy_main(["--dry-run", "--policy", str(dev_policy), "--hand-bus", "can", "--can-interface",
+                            "slcan", "--can-channel", adapter.port, "--duration", "30", "--log-dir", str(tmp_path),
+                            *FAST, "--hand-timeout", "0.3"])
+    finally:
+        adapter.stop()
+        left.stop()
+        right.stop()
+    err = capsys.readouterr().err
+    assert "Traceback" not in err
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert code == 1 and summary["outcome"] == "FAULT" and summary["policy_steps"] > 0
+    assert summary["final_phase"] == "DAMP" and any("hand" in f for f in summary["faults"]), summary["faults"]
