@@ -1,7 +1,8 @@
 """Why a run ended, and the exit code that says so (the table in deploy/README.md "Exit codes").
 
-0 only when the policy ran and then stopped as planned: its duration or motion ended, or the operator stopped it
-(q, remote SELECT, one Ctrl-C). Everything else names its cause in the code as well as in summary.json.
+0 only when the policy ran and then stopped as planned: its --duration ran out, or the operator stopped it (q,
+remote SELECT, one Ctrl-C; sim2sim's monitor stops it at the end of the clip the same way). Everything else
+names its cause in the code as well as in summary.json.
 """
 
 from __future__ import annotations
@@ -12,7 +13,7 @@ import threading
 
 
 class Outcome(enum.Enum):
-    COMPLETED = (0, "the policy ran and stopped as planned (duration, end of motion, operator stop)")
+    COMPLETED = (0, "the policy ran and stopped as planned (duration ran out, operator stop)")
     FAULT = (1, "a safety fault damped the robot")
     USAGE = (2, "bad command line, policy file, config or port; nothing was commanded")
     NOT_STARTED = (3, "the policy never ran: inputs never became usable, or stopped before the policy started")
