@@ -158,3 +158,23 @@ def test_sim_device_picks_the_warp_device_and_refuses_unknown_ones():
     cfg = load_yaml_dataclass(InteractionEnvCfg, TASK_CONFIG, ["backend=warp", "sim_device=tpu:7", "num_envs=2"])
     with pytest.raises(UserError, match="tpu:7"):
         factory.make_env([clip], cfg, embodiment)
+
+
+def test_finite_difference_accelerations_match_the_cpu_backend():
+    """link_acc / object_acc difference velocities across steps: on warp the velocities are views of the live
+    physics memory, so a kept previous value that is not a copy would make them exactly zero."""
+    embodiment, clip = load_embodiment("g1_inspire"), default_clip()
+    envs = {}
+    for backend in ("cpu", "warp"):
+        cfg = load_yaml_dataclass(InteractionEnvCfg, TASK_CONFIG, [f"backend={backend}", f"num_envs={NUM_ENVS}"])
+        envs[backend] = factory.make_env([clip], cfg, embodiment)
+        envs[backend].reset()
+    cpu, warp = envs["cpu"], envs["warp"]
+    generator = torch.Generator().manual_seed(1)
+    for _ in range(4):
+        actions = 0.2 * torch.randn(NUM_ENVS, cpu.num_actions, generator=generator)
+        cpu.step(actions)
+        warp.step(actions.to(warp.device))
+        assert warp.link_acc.abs().max() > 10.0  # the robot's links accelerate by tens of m/s^2 here
+        torch.testing.assert_close(warp.link_acc.cpu(), cpu.link_acc, atol=1e-2, rtol=0)
+        torch.testing.assert_close(warp.object_acc.cpu(), cpu.object_acc, atol=0.2, rtol=0)
