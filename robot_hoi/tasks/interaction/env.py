@@ -187,7 +187,7 @@ class InteractionEnv:
         stats = self._episode_stats(done, terminated, reached_end)
         extras = {"log": self._episode_log(done, stats), "episode": stats}
         if terminated.any():
-            extras["log"].update({f"Termination/{k}": v[terminated].float().mean().item() for k, v in reasons.items()})
+            extras["log"].update({f"Termination/{k}": v[terminated].float().mean() for k, v in reasons.items()})
         if truncated.any():
             extras["final_obs"] = self._observations()
         self.last_actions = self.actions.clone()
@@ -298,14 +298,16 @@ class InteractionEnv:
             "clip_id": self.clip_id[done].float(),
         }
 
-    def _episode_log(self, done: Tensor, stats: dict[str, Tensor]) -> dict[str, float]:
+    def _episode_log(self, done: Tensor, stats: dict[str, Tensor]) -> dict[str, Tensor | float]:
+        """Means over the episodes that ended this step as 0-d device tensors (the runner reads them back once
+        per iteration)."""
         if not done.any():
             return {}
         steps = self.episode_length[done].clamp(min=1).float()
-        log = {f"Episode_Reward/{name}": (s[done] / steps).mean().item() for name, s in self.episode_sums.items()}
-        log["Metrics/episode_length"] = steps.mean().item()
+        log = {f"Episode_Reward/{name}": (s[done] / steps).mean() for name, s in self.episode_sums.items()}
+        log["Metrics/episode_length"] = steps.mean()
         for key in ("success", "duration_s", "E_h_cm", "E_o_cm"):
-            log[f"Metrics/{key}"] = stats[key].mean().item()
+            log[f"Metrics/{key}"] = stats[key].mean()
         log["Metrics/psi_buffer"] = float(len(self.psi))
         return log
 
