@@ -17,8 +17,8 @@ def register(subparsers) -> None:
         description="Map a human-object clip onto the robot: scaled body, real-size object, hands anchored to "
         "the object, per-frame damped-least-squares IK. Writes OUT.npz + OUT.json and prints the residuals.",
     )
-    p.add_argument("clip", nargs="?", help="clip file (.pt InterMimic or .npz native); default: the embedded "
-                   "synthetic lift-and-carry clip")
+    p.add_argument("clip", nargs="?", help="clip file (.pt InterMimic or .npz native) or embedded:KIND; default: the embedded "
+                   "stand-lift-place clip (embedded:lift_place)")
     p.add_argument("--embodiment", default="g1_inspire", help="embodiment name or YAML path (default g1_inspire)")
     p.add_argument("-o", "--output", required=True, help="motion file to write (.npz; a .json sidecar goes next to it)")
     p.add_argument("--video", help="also write an mp4 of the retargeted motion")
@@ -63,7 +63,9 @@ def run(args: argparse.Namespace) -> int:
     result = retarget_clip(clip, cfg, model, scale=args.scale, options=options)
     report = build_report(result)
     report["clip"] = clip.name
+    report["feasibility"] = _feasibility(clip, cfg, result.motion)
     result.motion.meta["report"] = report
+    result.motion.meta["feasibility"] = report["feasibility"]
     npz, sidecar = result.motion.save(out)
     report["output"] = {"motion": str(npz), "sidecar": str(sidecar)}
     if args.video:
@@ -78,17 +80,40 @@ def run(args: argparse.Namespace) -> int:
     else:
         print(f"clip {clip.name}")
         print(format_report(report))
+        print(format_feasibility(report["feasibility"]))
         print(f"wrote {npz} and {sidecar}")
         if args.video:
             print(f"wrote {args.video} (rendered with {report['video']['renderer']})")
     return 0
 
 
+def _feasibility(clip, cfg, motion) -> dict:
+    """Can the robot execute it: kinematic figures and the hold test (a root-held replay in the training scene)."""
+    from robot_hoi.rl.eval_cli import TASK_CONFIG
+    from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg
+    from robot_hoi.tasks.interaction.factory import kinematic_report
+    from robot_hoi.tasks.interaction.feasibility import hold_test
+    from robot_hoi.utils.config import load_yaml_dataclass
+
+    report = kinematic_report(motion, cfg)
+    report["hold_test"] = hold_test(clip, load_yaml_dataclass(InteractionEnvCfg, TASK_CONFIG), cfg, motion)
+    return report
+
+
+def format_feasibility(f: dict) -> str:
+    slide = ", ".join(f"{k.split('_')[0]} {v} cm" for k, v in f["foot_slide_cm"].items())
+    hold = f.get("hold_test")
+    lines = [f"feasibility: foot slide in contact {slide}; CoM outside support in "
+             f"{100 * f['com_outside_support_fraction']:.0f}% of frames; joint speed peak "
+             f"{f['joint_speed_peak_rad_s']} rad/s (p99 {f['joint_speed_p99_rad_s']})"]
+    if hold:
+        lines.append(f"hold test (root held, zero residual): object drop {hold['object_drop_cm']} cm over "
+                     f"{hold['frames_held']} held frames; {'ran to the end' if hold['completed'] else 'ended early'}"
+                     f" after {hold['frames']} frames")
+    return "\n".join(lines)
+
+
 def _load(args: argparse.Namespace):
-    if args.clip is None:
-        from robot_hoi.data.synth import default_clip
+    from robot_hoi.tasks.interaction.factory import DEFAULT_SOURCE, load_source
 
-        return default_clip()
-    from robot_hoi.data.clip import load_clip
-
-    return load_clip(args.clip, **clip_options(args))
+    return load_source(args.clip or DEFAULT_SOURCE, clip_options(args))

@@ -8,6 +8,7 @@ from dataclasses import asdict, dataclass, field
 import mujoco
 import numpy as np
 
+from robot_hoi.retarget.executable import ExecutableSettings, limit_speed, smooth_joints, squeeze_offsets
 from robot_hoi.retarget.hands import GraspRule, HandJoints, closure_profile, finger_angles, holding
 from robot_hoi.retarget.ik import IKResult, IKSettings, IKSolver
 from robot_hoi.retarget.kinematics import apply_joint_couplings, free_joint_id, joint_ids, resolve_links
@@ -23,6 +24,7 @@ class RetargetOptions:
     ik: IKSettings = field(default_factory=IKSettings)
     grasp: GraspRule = field(default_factory=GraspRule)
     use_landmarks: bool = True  # IK on anatomical landmarks (landmarks.py) instead of the raw link origins
+    executable: ExecutableSettings = field(default_factory=ExecutableSettings)  # smoothing + grasp squeeze
 
 
 @dataclass
@@ -96,6 +98,15 @@ def retarget_targets(
     if targets.object_hull is not None:
         track = (targets.object_hull, targets.object_pos, targets.object_quat_wxyz)
     result = solver.solve(targets.pos, targets.weight, preset, targets.root_quat_wxyz, object_track=track)
+    # legs stay as solved: smoothing them alone would move planted feet (the root keeps its path)
+    upper = [n for n in body_joints if not any(k in n for k in ("hip", "knee", "ankle"))]
+    upper_qadr = model.jnt_qposadr[joint_ids(model, upper)]
+    smoothed = smooth_joints(result.qpos, upper_qadr, targets.fps, options.executable)
+    result = _depenetrate(solver, solver.evaluate(smoothed, targets.pos, result.iterations, track), targets, track)
+    limited = result.qpos.copy()  # the push-out may step fast again: the speed limit has the last word
+    limited[:, upper_qadr] = limit_speed(limited[:, upper_qadr], options.executable.max_joint_speed / targets.fps)
+    result = solver.evaluate(limited, targets.pos, result.iterations, track)
+    squeeze = _squeeze(model, cfg, result.qpos, hold, targets.fps, options)
     seconds = time.perf_counter() - start
 
     act_qadr = model.jnt_qposadr[model.actuator_trnid[:, 0]]
@@ -104,7 +115,7 @@ def retarget_targets(
         fps=targets.fps,
         qpos=result.qpos,
         qvel=finite_difference_qvel(model, result.qpos, targets.fps),
-        joint_pos=result.qpos[:, act_qadr],
+        joint_pos=(result.qpos + squeeze)[:, act_qadr],  # PD targets: the state plus the grasp squeeze
         link_pos=result.link_pos,
         link_quat_wxyz=result.link_quat_wxyz,
         target_pos=targets.pos,
@@ -121,10 +132,43 @@ def retarget_targets(
             "mapping": asdict(options.mapping),
             "ik": asdict(options.ik),
             "grasp": asdict(options.grasp),
+            "executable": asdict(options.executable),
             "landmarks": {k: [f, list(off)] for k, (f, off) in landmarks.items()},
         },
     )
     return RetargetResult(motion=motion, targets=targets, ik=result, hold=hold, seconds=seconds)
+
+
+def _depenetrate(solver: IKSolver, result: IKResult, targets: RobotTargets, track, depth: float = 0.01,
+                 iterations: int = 4, passes: int = 3) -> IKResult:
+    """Smoothing can drag a hand into the object where the IK had jumped around it: a few IK iterations (with the
+    hull's push-out rows), warm-started from the smoothed pose, on the frames where a probe is deeper than
+    `depth`."""
+    for _ in range(passes):
+        frames = np.flatnonzero(result.object_penetration > depth)
+        if track is None or not len(frames):
+            break
+        qpos = result.qpos.copy()
+        for t in frames:
+            solver._object = solver._object_at(track, int(t))
+            qpos[t] = solver.solve_frame(qpos[t], targets.pos[t], targets.weight[t], iterations)[0]
+        solver._object = None
+        result = solver.evaluate(qpos, targets.pos, result.iterations, track)
+    return result
+
+
+def _squeeze(model: mujoco.MjModel, cfg, qpos: np.ndarray, hold: dict[str, np.ndarray], fps: float,
+             options: RetargetOptions) -> np.ndarray:
+    """(T, nq) grasp-squeeze offsets for the PD targets (executable.py), ramped like the finger closure."""
+    sides = ("left", "right")
+    if options.executable.squeeze_depth <= 0 or set(hold) != set(sides):
+        return np.zeros_like(qpos)
+    ramp = {side: closure_profile(hold[side], fps, options.grasp) / max(options.grasp.closure, 1e-9)
+            for side in sides}
+    wrists = {side: f"{side}_wrist_yaw_link" for side in sides}
+    arms = {side: [f"{side}_shoulder_pitch_joint", f"{side}_shoulder_roll_joint", f"{side}_shoulder_yaw_joint",
+                   f"{side}_elbow_joint"] for side in sides}
+    return squeeze_offsets(model, qpos, ramp, wrists, arms, options.executable)
 
 
 def retarget_clip(

@@ -3,10 +3,16 @@
 The mapping (the team's design; every number below is a `TargetMapping` field):
 
 * Scale. s = robot_height / subject_height (G1: 1.32 m), unless the caller passes `scale`.
-* Body. The pelvis (root) keeps its real horizontal path, so the robot walks where the human walked; heights and
-  the body's shape around the root are scaled:  p' = [root_xy + s (p_xy - root_xy),  s p_z].
-* Object. It keeps its real size and its horizontal path; only its height above its resting height is scaled:
-  z' = z_rest + s (z - z_rest), z_rest = its height in the first frame. Its orientation is unchanged.
+* Body. The pelvis' horizontal path is scaled about its first position, root'_xy = root_0 + s (root_xy - root_0),
+  so strides match the robot's legs and planted feet do not slide (keeping the human's path made feet slide by
+  (1 - s) x the distance walked); heights and the body's shape around the root are scaled:
+  p' = [root'_xy + s (p_xy - root_xy),  s p_z].
+* Object. It keeps its real size; only its height above its resting height is scaled: z' = z_rest + s (z - z_rest),
+  z_rest = its height in the first frame. Horizontally the gap between the pelvis and the object's surface is
+  scaled (not the distance to its centre): with dir = the unit vector pelvis -> object centre and r = the object's
+  extent from its centre toward the pelvis,  o'_xy = root'_xy + dir (s (|o_xy - root_xy| - r) + r). A resting
+  object stays put while the robot walks to it, and a real-size box is not pushed into the robot's smaller
+  reach. Its orientation is unchanged.
 * Anchoring. A link near the object follows the object instead of the scaled body, so the hands stay on a
   real-size object while the rest of the robot is scaled. For link i at frame t, with d = the human link's
   distance to the object surface (the object's sample points moved by its pose):
@@ -157,12 +163,28 @@ def surface_distance(
     return np.sqrt(np.maximum(sq.min(axis=2), 0.0))
 
 
+def scale_root_path(root_xy: np.ndarray, s: float) -> np.ndarray:
+    """root'_xy = root_0 + s (root_xy - root_0) for the pelvis path (T, 2)."""
+    return root_xy[:1] + s * (root_xy - root_xy[:1])
+
+
 def scale_body(body_pos: np.ndarray, root_xy: np.ndarray, s: float) -> np.ndarray:
-    """p' = [root_xy + s (p_xy - root_xy), s p_z] for positions (T, N, 3) and the root path (T, 2)."""
+    """p' = [root'_xy + s (p_xy - root_xy), s p_z] for positions (T, N, 3) and the human root path (T, 2)."""
     out = np.empty_like(body_pos)
-    out[..., :2] = root_xy[:, None, :] + s * (body_pos[..., :2] - root_xy[:, None, :])
+    out[..., :2] = scale_root_path(root_xy, s)[:, None, :] + s * (body_pos[..., :2] - root_xy[:, None, :])
     out[..., 2] = s * body_pos[..., 2]
     return out
+
+
+def place_object_xy(object_xy: np.ndarray, object_quat_xyzw: np.ndarray, points_local: np.ndarray,
+                    root_xy: np.ndarray, s: float) -> np.ndarray:
+    """o'_xy = root'_xy + dir (s (|o - root| - r) + r): the pelvis-to-surface gap scaled, the object real size."""
+    offset = object_xy - root_xy
+    dist = np.linalg.norm(offset, axis=-1, keepdims=True)
+    direction = offset / np.maximum(dist, 1e-9)
+    points = np.einsum("tij,pj->tpi", Rotation.from_quat(object_quat_xyzw).as_matrix(), points_local)[..., :2]
+    extent = np.clip((points * -direction[:, None, :]).sum(-1).max(-1, keepdims=True), 0.0, dist)
+    return scale_root_path(root_xy, s) + direction * (s * (dist - extent) + extent)
 
 
 def scale_object(object_pos: np.ndarray, s: float, scale_height: bool = True) -> np.ndarray:
@@ -205,6 +227,7 @@ def map_positions(
     """
     scaled = scale_body(human_pos, root_xy, s)
     obj_robot = scale_object(object_pos, s, mapping.scale_object_height)
+    obj_robot[:, :2] = place_object_xy(object_pos[:, :2], object_quat_xyzw, points_local, root_xy, s)
     dist = surface_distance(human_pos, object_pos, object_quat_xyzw, points_local, local_distance)
     a = anchor_weights(dist, mapping.anchor_radius, contact_labels if mapping.anchor_mode == "contact" else None)
     rot_r = Rotation.from_quat(object_quat_xyzw).as_matrix()  # the object keeps its orientation

@@ -47,11 +47,14 @@ def _scene():
 def test_body_scaling_object_height_and_anchoring_by_hand():
     s, obj_pos, obj_quat, human, root_xy = _scene()
     targets, a, obj_robot, dist = map_positions(human, root_xy, obj_pos, obj_quat, CUBE_POINTS, s, TargetMapping())
-    # far link: p' = [root_xy + s (p_xy - root_xy), s z]
+    # far link: p' = [root'_xy + s (p_xy - root_xy), s z] (the root does not move here: root' = root)
     np.testing.assert_allclose(targets[:, 0], [[1.2, 2.1, 0.5], [1.2, 2.1, 0.5]])
     np.testing.assert_allclose(a[:, 0], 0.0)
-    # object: horizontal path unchanged; height above rest (0.5) scaled: 0.5 + 0.5 * 1.0
-    np.testing.assert_allclose(obj_robot, [[5.0, 5.0, 0.5], [5.0, 6.0, 1.0]])
+    # object: height above rest (0.5) scaled: 0.5 + 0.5 * 1.0; horizontally the pelvis-to-surface gap is scaled.
+    # Frame 0: offset (4, 3), |.| = 5, dir (0.8, 0.6), the cube's extent toward the pelvis r = 0.5 (0.8 + 0.6) = 0.7
+    # (a corner): o' = (1, 2) + dir (0.5 (5 - 0.7) + 0.7) = (3.28, 3.71). Frame 1: offset (4, 4), r = 0.5 sqrt(2):
+    # o' = (1, 2) + (1, 1) / sqrt(2) * (0.5 (4 sqrt(2) - r) + r) = (3.25, 4.25).
+    np.testing.assert_allclose(obj_robot, [[3.28, 3.71, 0.5], [3.25, 4.25, 1.0]], atol=1e-9)
     # touching link: a = 1, follows the object: same object-frame point, robot-space pose
     assert dist[1, 1] == pytest.approx(0.0, abs=1e-12)
     assert a[1, 1] == pytest.approx(1.0)
@@ -70,7 +73,7 @@ def test_object_height_kept_when_switched_off():
     s, obj_pos, obj_quat, human, root_xy = _scene()
     mapping = TargetMapping(scale_object_height=False)
     _, _, obj_robot, _ = map_positions(human, root_xy, obj_pos, obj_quat, CUBE_POINTS, s, mapping)
-    np.testing.assert_allclose(obj_robot, obj_pos)
+    np.testing.assert_allclose(obj_robot[:, 2], obj_pos[:, 2])
 
 
 def test_contact_labels_override_distance_weights():

@@ -18,14 +18,16 @@ from robot_hoi.utils.atomic import atomic_write_text
 
 EMBEDDED_PREFIX = "embedded:"
 CLIP_SUFFIXES = (".pt", ".npz")
+# The embedded stand-lift-place clip: the first clip a teacher completes on a CPU budget (no walking).
+DEFAULT_SOURCE = f"{EMBEDDED_PREFIX}lift_place"
 GROUP_KEYS = ("subject", "object", "clip")
 TASK_FILE = "task.json"
 
 
 def expand_sources(data: list[str] | None) -> list[str]:
-    """Files and folders -> clip sources (sorted); nothing -> the embedded lift-and-carry clip."""
+    """Files and folders -> clip sources (sorted); nothing -> the embedded default clip."""
     if not data:
-        return [f"{EMBEDDED_PREFIX}lift_carry"]
+        return [DEFAULT_SOURCE]
     sources: list[str] = []
     for item in data:
         if item.startswith(EMBEDDED_PREFIX):
@@ -81,13 +83,25 @@ def load_or_retarget(clip, embodiment, cache: Path | None):
     if path is not None and path.exists():
         return RobotMotion.load(path)
     motion = retarget_clip(clip, embodiment).motion
+    motion.meta["feasibility"] = kinematic_report(motion, embodiment)
     if path is not None:
         motion.save(path)
     return motion
 
 
-def make_env(clips: list, env_cfg: InteractionEnvCfg, embodiment, cache: Path | None = None):
-    """An InteractionEnv tracking `clips` (all with the same object)."""
+def kinematic_report(motion, embodiment) -> dict:
+    """Foot slide, CoM outside support and joint speeds of a retarget (robot_hoi.retarget.feasibility)."""
+    from robot_hoi.embodiment import build_model
+    from robot_hoi.retarget.feasibility import kinematic_feasibility
+
+    hand_joints = {c.joint for hand in embodiment.hands.values() for c in hand.channels}
+    body = [i for i, n in enumerate(embodiment.actuator_names) if n not in hand_joints]
+    feet = [n for n in embodiment.link_map if "ankle_roll" in n]
+    return kinematic_feasibility(build_model(embodiment), motion, feet, body)
+
+
+def make_env(clips: list, env_cfg: InteractionEnvCfg, embodiment, cache: Path | None = None, motions=None):
+    """An InteractionEnv tracking `clips` (all with the same object); `motions`: their retargets, if at hand."""
     from robot_hoi.tasks.interaction.env import InteractionEnv
     from robot_hoi.tasks.interaction.reference import build_reference
     from robot_hoi.tasks.interaction.scene_setup import InteractionScene
@@ -99,8 +113,8 @@ def make_env(clips: list, env_cfg: InteractionEnvCfg, embodiment, cache: Path | 
         raise UserError(f"clip {clips[0].name}: no object mesh loaded; the simulation needs it")
     scene = InteractionScene(embodiment, clips[0].object, self_collision=env_cfg.self_collision,
                              density=env_cfg.object_density, friction=env_cfg.object_friction)
-    references = [build_reference(c, load_or_retarget(c, embodiment, cache), env_cfg.reference_links)
-                  for c in clips]
+    motions = motions or [load_or_retarget(c, embodiment, cache) for c in clips]
+    references = [build_reference(c, m, env_cfg.reference_links) for c, m in zip(clips, motions, strict=True)]
     return InteractionEnv(env_cfg, scene, references)
 
 
