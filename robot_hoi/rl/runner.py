@@ -150,8 +150,10 @@ class OnPolicyRunner:
         last_saved = -1
         while True:
             self._on_iteration_start()
+            curriculum = self._update_curriculum()
             t0 = time.monotonic()
             env_logs = self._rollout()
+            env_logs.update(curriculum)
             t1 = time.monotonic()
             stats = self.alg.update()
             t2 = time.monotonic()
@@ -175,6 +177,11 @@ class OnPolicyRunner:
             if budget.exhausted(elapsed, samples, iterations):
                 break
         return last_saved
+
+    def _update_curriculum(self) -> dict[str, float]:
+        """Envs with a training curriculum (e.g. assist wrenches) follow the samples trained so far."""
+        update = getattr(self.env, "update_curriculum", None)
+        return update(self.total_samples) if update is not None else {}
 
     @torch.no_grad()
     def _rollout(self) -> dict[str, float]:
@@ -297,6 +304,7 @@ class OnPolicyRunner:
                 "git_commit": git["commit"],
                 "git_diff": git["diff"],
                 "torch_rng_state": torch.get_rng_state(),
+                "curriculum": getattr(self.env, "curriculum_state", dict)(),
             },
         )
 

@@ -43,8 +43,10 @@ class PhysicsBackend(ABC):
         return self.model.opt.timestep * self.decimation
 
     @abstractmethod
-    def step(self, ctrl: Tensor) -> None:
-        """Advance every environment by one control step with position targets `ctrl` (num_envs, nu)."""
+    def step(self, ctrl: Tensor, wrench: Tensor | None = None) -> None:
+        """Advance every environment by one control step with position targets `ctrl` (num_envs, nu). `wrench`
+        (num_envs, nbody, 6): world-frame force and torque at each body's centre of mass (MuJoCo's xfrc_applied),
+        held over every physics sub-step of this control step; None applies none."""
 
     @abstractmethod
     def set_state(self, env_ids: Tensor, qpos: Tensor, qvel: Tensor) -> None:

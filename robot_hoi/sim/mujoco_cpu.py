@@ -17,6 +17,7 @@ from torch import Tensor
 from robot_hoi.sim.backend import PhysicsBackend
 
 _STATE_SPEC = mujoco.mjtState.mjSTATE_FULLPHYSICS.value
+_CTRL_SPEC = mujoco.mjtState.mjSTATE_CTRL.value
 
 
 def _state_slice(model: mujoco.MjModel, component: mujoco.mjtState) -> slice:
@@ -58,6 +59,7 @@ class MujocoCpuBackend(PhysicsBackend):
         self._state = np.tile(initial, (num_envs, 1))
         self._sensordata = np.tile(data.sensordata, (num_envs, 1))
         self._ctrl = np.zeros((num_envs, decimation, model.nu))
+        self._ctrl_wrench: np.ndarray | None = None  # allocated on the first step with wrenches
         self._state_out = np.zeros((num_envs, decimation, self.nstate))
         self._sens_out = np.zeros((num_envs, decimation, model.nsensordata))
         self._qpos_t = torch.from_numpy(self._state[:, self._qpos_slice])
@@ -76,10 +78,20 @@ class MujocoCpuBackend(PhysicsBackend):
             pass
 
     # ---- stepping ---------------------------------------------------------------------------------------------
-    def step(self, ctrl: Tensor) -> None:
+    def step(self, ctrl: Tensor, wrench: Tensor | None = None) -> None:
         self._ctrl[:] = ctrl.detach().to(torch.float64).cpu().numpy()[:, None, :]
+        control, spec = self._ctrl, _CTRL_SPEC
+        # Once wrenches were applied they are always passed (zeros when None): the pool's MjData keep
+        # xfrc_applied between calls, and a stale one would keep pushing.
+        if wrench is not None or self._ctrl_wrench is not None:  # controls and wrenches, held over the sub-steps
+            if self._ctrl_wrench is None:
+                self._ctrl_wrench = np.zeros((self.num_envs, self.decimation, self.model.nu + 6 * self.model.nbody))
+            self._ctrl_wrench[:, :, : self.model.nu] = self._ctrl
+            self._ctrl_wrench[:, :, self.model.nu:] = 0.0 if wrench is None else \
+                wrench.detach().to(torch.float64).cpu().numpy().reshape(self.num_envs, 1, -1)
+            control, spec = self._ctrl_wrench, _CTRL_SPEC | mujoco.mjtState.mjSTATE_XFRC_APPLIED.value
         self._pool.rollout(
-            self._models, self._datas, self._state, self._ctrl,
+            self._models, self._datas, self._state, control, control_spec=spec,
             skip_checks=True, nstep=self.decimation, state=self._state_out, sensordata=self._sens_out,
         )
         self._state[:] = self._state_out[:, -1]

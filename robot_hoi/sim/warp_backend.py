@@ -63,6 +63,8 @@ class MujocoWarpBackend(PhysicsBackend):
         view = wp.to_torch
         self._qpos_t, self._qvel_t = view(self._d.qpos), view(self._d.qvel)
         self._ctrl_t, self._sens_t = view(self._d.ctrl), view(self._d.sensordata)
+        self._xfrc_t = view(self._d.xfrc_applied)  # (nworld, nbody, 6) spatial vectors
+        self._wrench_applied = False
         self._overflow_t, self._nefc_t, self._nacon_t = view(self._d.overflow), view(self._d.nefc), view(self._d.nacon)
         self._contact_world_t = view(self._d.contact.worldid)
         self._buffer_bits = _overflow_buffers(mjw)
@@ -108,8 +110,14 @@ class MujocoWarpBackend(PhysicsBackend):
         for _ in range(self.decimation):
             self._mjw.step(self._m, self._d)
 
-    def step(self, ctrl: Tensor) -> None:
+    def step(self, ctrl: Tensor, wrench: Tensor | None = None) -> None:
         self._ctrl_t.copy_(ctrl.detach())
+        if wrench is not None or self._wrench_applied:  # xfrc_applied persists in the worlds: clear it once
+            if wrench is None:
+                self._xfrc_t.zero_()
+            else:
+                self._xfrc_t.copy_(wrench.detach().reshape(self._xfrc_t.shape))
+            self._wrench_applied = wrench is not None
         with self._wp.ScopedDevice(self._wp_device):
             if self._step_graph is not None:
                 self._wp.capture_launch(self._step_graph)

@@ -89,3 +89,12 @@ def quat_from_yaw(yaw: Tensor) -> Tensor:
     half = 0.5 * yaw
     zeros = torch.zeros_like(half)
     return torch.stack([torch.cos(half), zeros, zeros, torch.sin(half)], dim=-1)
+
+
+def quat_to_rotvec(q: Tensor) -> Tensor:
+    """Axis * angle (angle in [0, pi]) of unit wxyz quaternions (the shorter way round)."""
+    q = torch.where(q[..., :1] < 0, -q, q)
+    vec = q[..., 1:]
+    sin_half = vec.norm(dim=-1, keepdim=True)
+    angle = 2.0 * torch.atan2(sin_half, q[..., :1])
+    return vec * torch.where(sin_half > 1e-8, angle / sin_half.clamp(min=1e-8), 2.0)  # small angles: 2 * vec

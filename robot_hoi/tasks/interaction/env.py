@@ -15,6 +15,7 @@ from torch import Tensor
 from robot_hoi import termination
 from robot_hoi.errors import UserError
 from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg
+from robot_hoi.tasks.interaction.mdp import assist as assist_terms
 from robot_hoi.tasks.interaction.mdp import observations as obs_terms
 from robot_hoi.tasks.interaction.mdp import rewards as reward_terms
 from robot_hoi.tasks.interaction.mdp import terminations as term_terms
@@ -92,6 +93,8 @@ class InteractionEnv:
         self.reward_scales = {n: t.scale for n, t in cfg.rewards.items() if t is not None}
         if cfg.reward_mode not in ("product", "sum"):
             raise UserError(f"env.reward_mode must be 'product' or 'sum', not {cfg.reward_mode!r}")
+        self.object_mass = scene.object_mass
+        self.assist_level = assist_terms.assist_level(cfg.assist, 0)
         self.feet_link_mask = torch.zeros(layout.num_links, device=self.device)
         self.feet_link_mask[scene.feet_link_ids] = 1.0
         # an episode from the stand must be able to cover the longest clip plus its warmup
@@ -163,7 +166,8 @@ class InteractionEnv:
     def step(self, actions: Tensor):
         self.actions = actions.detach().clamp(-self.cfg.action_clip, self.cfg.action_clip)
         targets = self.action_offset() + self.action_scale * self.actions
-        self.backend.step(torch.maximum(torch.minimum(targets, self.ctrl_high), self.ctrl_low))
+        wrench = assist_terms.assist_wrench(self, self.assist_level) if self.assist_level > 0 else None
+        self.backend.step(torch.maximum(torch.minimum(targets, self.ctrl_high), self.ctrl_low), wrench)
         self.episode_length += 1
         in_warmup = self.warmup_left > 0
         self.warmup_left = (self.warmup_left - 1).clamp(min=0)
@@ -195,6 +199,16 @@ class InteractionEnv:
         if done_ids.numel():
             self._reset_envs(done_ids)
         return self._observations(), reward, terminated, truncated, extras
+
+    # ---- curriculum ---------------------------------------------------------------------------------------------
+    def update_curriculum(self, total_samples: int) -> dict[str, float]:
+        """Called by the runner before each iteration; returns what to log."""
+        self.assist_level = assist_terms.assist_level(self.cfg.assist, total_samples)
+        return {"Curriculum/assist_level": self.assist_level}
+
+    def curriculum_state(self) -> dict[str, float]:
+        """Saved with each checkpoint: the curriculum level reached."""
+        return {"assist_level": self.assist_level}
 
     def action_offset(self) -> Tensor:
         """PD target for a zero action: the default pose, or (action_offset "reference") the reference joint

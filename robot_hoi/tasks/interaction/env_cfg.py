@@ -62,6 +62,25 @@ class InitCfg:
 
 
 @dataclass
+class AssistCfg:
+    """Assist wrenches (curriculum, mdp/assist.py): PD pulls on the pelvis and the object toward the reference,
+    annealed linearly from initial_level to 0 over anneal_samples training samples. Gains are per unit level."""
+
+    enabled: bool = False
+    initial_level: float = 1.0
+    anneal_samples: float = 3.0e6
+    root_kp: float = 2000.0      # N/m
+    root_kd: float = 100.0       # N s/m
+    root_kp_rot: float = 60.0    # N m/rad
+    root_kd_rot: float = 4.0     # N m s/rad (held for a control step: 10 makes the pelvis yaw ring, measured)
+    object_kp: float = 300.0
+    object_kd: float = 20.0
+    object_kp_rot: float = 5.0
+    object_kd_rot: float = 0.3
+    object_gravity_share: float = 0.5  # of the object's weight carried by the assist at full level
+
+
+@dataclass
 class InteractionEnvCfg:
     embodiment: str = "g1_inspire"
     num_envs: int = 64
@@ -70,6 +89,7 @@ class InteractionEnvCfg:
     nthread: int | None = None
     seed: int = 0
     keyframes: tuple[int, ...] = (1, 16)    # teacher keyframes K (Sec. 4)
+    teacher_obs: str = "compact"            # "compact" (~400: pelvis, joints, hands, object) | "full" (Eq. 1, ~1750)
     student_keyframes: tuple[int, ...] = (1, 2, 4, 16)  # student keyframes K (Sec. 4)
     # The deployable observation (deploy/observations.py terms, in this order); empty = no "student" group.
     student_obs_terms: tuple[str, ...] = ()
@@ -90,6 +110,7 @@ class InteractionEnvCfg:
     terminations: TerminationCfg = field(default_factory=TerminationCfg)
     init: InitCfg = field(default_factory=InitCfg)
     psi: PsiCfg = field(default_factory=PsiCfg)
+    assist: AssistCfg = field(default_factory=AssistCfg)
     success_min_frames_fraction: float = 0.95  # success = tracked to (almost) the end without termination
 
 

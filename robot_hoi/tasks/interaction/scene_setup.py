@@ -39,6 +39,8 @@ class InteractionScene:
         # wrist + fingertip links of the left and right hand (for contact tolerance)
         self.hand_link_ids = hand_link_groups(self.layout.link_names)
         self.hand_link_flat_ids = self.hand_link_ids[0] + self.hand_link_ids[1]
+        self.pelvis_body_id = int(self.model.jnt_bodyid[0])  # the free joint's body
+        self.object_mass = float(self.model.body_mass[self.object_body_id()])
         self.feet_link_ids = [i for i, n in enumerate(self.layout.link_names) if "ankle" in n or "toe" in n]
 
     def _resolve_layout(self, contact_names: list[str]) -> SceneLayout:

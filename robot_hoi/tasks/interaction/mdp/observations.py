@@ -129,9 +129,51 @@ SELF_TERMS = (
 )
 
 
+# ---- compact teacher observation (env.teacher_obs "compact") ------------------------------------------------------
+# Proprioception, the object and the hands' surface vectors, plus per keyframe the reference pelvis, joints, hand
+# links and object relative to the robot's pelvis in its heading frame: ~400 numbers instead of ~1750. Everything
+# the full set adds (all link poses, velocities and their references) follows from the joints and the pelvis.
+def hand_surface_vectors(env) -> Tensor:
+    return _flat(_to_heading(env, env.d[:, env.scene.hand_link_flat_ids]))
+
+
+def hand_contact_flags(env) -> Tensor:
+    return env.hand_contact_found.float()
+
+
+def reference_compact(env, k: int) -> Tensor:
+    """Reference at t+k relative to the robot: pelvis position and rotation, joints, hand links, object, and which
+    hands must touch the object."""
+    ref = env.reference_at(k)
+    hands = env.scene.hand_link_flat_ids
+    return torch.cat([
+        _to_heading(env, ref.root_pos - env.root_pos),
+        _rot_in_heading(env, ref.root_rotmat),
+        ref.joint_pos - env.default_joint_pos,
+        _flat(_to_heading(env, ref.link_pos[:, hands] - env.root_pos[:, None])),
+        _to_heading(env, ref.object_pos - env.root_pos),
+        _rot_in_heading(env, ref.object_rotmat),
+        ref.hand_contact.float(),
+    ], dim=-1)
+
+
+COMPACT_SELF_TERMS = (
+    root_height, root_rotation, root_linear_velocity, root_angular_velocity, joint_positions, joint_velocities,
+    object_state, hand_surface_vectors, hand_contact_flags, last_action, warmup_phase,
+)
+TEACHER_OBS_SETS = {"full": (SELF_TERMS, reference_goal), "compact": (COMPACT_SELF_TERMS, reference_compact)}
+
+
+def _teacher_terms(env):
+    if env.cfg.teacher_obs not in TEACHER_OBS_SETS:
+        raise ValueError(f"env.teacher_obs must be one of {sorted(TEACHER_OBS_SETS)}, not {env.cfg.teacher_obs!r}")
+    return TEACHER_OBS_SETS[env.cfg.teacher_obs]
+
+
 def teacher_observation(env) -> Tensor:
-    parts = [term(env) for term in SELF_TERMS]
-    parts += [reference_goal(env, k) for k in env.cfg.keyframes]
+    self_terms, goal = _teacher_terms(env)
+    parts = [term(env) for term in self_terms]
+    parts += [goal(env, k) for k in env.cfg.keyframes]
     return torch.cat(parts, dim=-1)
 
 
@@ -144,8 +186,9 @@ def critic_extras(env) -> Tensor:
 
 def teacher_observation_spec(env) -> list[dict]:
     """Names and sizes of the policy observation, in order (exported with the policy)."""
-    spec = [{"name": f"teacher.{term.__name__}", "size": int(term(env).shape[1])} for term in SELF_TERMS]
-    spec += [{"name": f"teacher.reference_goal_k{k}", "size": int(reference_goal(env, k).shape[1])}
+    self_terms, goal = _teacher_terms(env)
+    spec = [{"name": f"teacher.{term.__name__}", "size": int(term(env).shape[1])} for term in self_terms]
+    spec += [{"name": f"teacher.{goal.__name__}_k{k}", "size": int(goal(env, k).shape[1])}
              for k in env.cfg.keyframes]
     return spec
 
