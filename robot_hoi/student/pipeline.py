@@ -199,7 +199,8 @@ def student_environment(setup: Setup, write: bool = True) -> StudentParts:
                         "longer, or use --set distill.reference=mocap")
     env = InteractionEnv(setup.env_cfg, setup.scene, [distilled[i][0] for i in keep])
     timeline = ReferenceTimeline([setup.mocap[i] for i in keep], env)
-    view = ReferenceView(env, timeline, setup.teacher_env_cfg.keyframes, setup.teacher_env_cfg.warmup_frames)
+    view = ReferenceView(env, timeline, setup.teacher_env_cfg.keyframes, setup.teacher_env_cfg.warmup_frames,
+                         setup.teacher_env_cfg.teacher_obs)
     for member in setup.members:
         member.view = view
     composite = CompositeTeacher(setup.members, [setup.clip_teacher[i] for i in keep])

@@ -18,7 +18,7 @@ def test_default_clip_json_report_motion_and_video(tmp_path, capsys):
                "--video-stride", "100"])
     assert rc == 0
     report = json.loads(capsys.readouterr().out)
-    assert report["clip"].startswith("synth_lift_carry")
+    assert report["clip"].startswith("synth_lift_place")
     assert report["frames"] > 100 and report["fps"] == 30.0 and 0.6 < report["scale"] < 0.9
     assert set(report["position_error"]) == {"pelvis", "legs", "feet", "torso", "head", "arms", "wrists", "fingers"}
     for entry in report["position_error"].values():

@@ -16,7 +16,7 @@ def test_report_for_the_embedded_clip(e2e_report, exported_policy):
     assert data["format"] == "robot-hoi sim2sim report"
     assert [p["name"] for p in data["perturbations"]] == list(SUITES["default"])
     assert [c["perturbation"] for c in data["cells"]] == list(SUITES["default"])
-    assert data["clips"][0]["name"].startswith("synth_lift_carry")
+    assert data["clips"][0]["name"].startswith("synth_lift_place")
     assert data["policies"][0]["path"] == str(exported_policy) and len(data["policies"][0]["sha256"]) == 64
     assert any("integrator" in d for d in data["physics"]["differences"])
     for cell in data["cells"]:

@@ -17,13 +17,13 @@ def test_distil_export_check_and_dry_run(teacher_run, tmp_path, capsys):
     out = tmp_path / "student"
     assert main(student_args(teacher_run, out)) == 0
     printed = capsys.readouterr().out
-    assert "[reference] synth_lift_carry_seed0" in printed and "student (MoCap)" in printed
+    assert "[reference] synth_lift_place_seed0" in printed and "student (MoCap)" in printed
     ckpt = out / "student" / "model_2.pt"
     model, cfg, data = load_student(ckpt)
     assert cfg.runner.actor_obs_groups == ["student"] and model.layout.keyframes == (1, 2, 4, 16)
     task = json.loads((out / "student" / "task.json").read_text())
-    assert task["references"] == ["../references/synth_lift_carry_seed0.npz"]
-    assert (out / "references" / "synth_lift_carry_seed0.npz").is_file()
+    assert task["references"] == ["../references/synth_lift_place_seed0.npz"]
+    assert (out / "references" / "synth_lift_place_seed0.npz").is_file()
     report = json.loads((out / "student" / "eval.json").read_text())
     assert set(report) == {"teacher synthetic-box (MoCap)", "student (its reference)", "student (MoCap)"}
 

@@ -9,7 +9,7 @@ from robot_hoi.cli import main
 
 from .conftest import student_args
 
-CLIP = "synth_lift_carry_seed0"
+CLIP = "synth_lift_place_seed0"
 
 
 @pytest.fixture(scope="module")
@@ -42,7 +42,7 @@ def test_student_eval_matches_the_runs_own_evaluation(student_run, capsys):
 
 def test_student_eval_on_given_clips_and_as_a_table(student_run, capsys):
     ckpt = student_run / "student" / "model_1.pt"
-    report = eval_json(capsys, ckpt, "--data", "embedded:lift_carry")
+    report = eval_json(capsys, ckpt, "--data", "embedded:lift_place")
     assert set(report["clips"]) == {CLIP} and "distilled" not in report
     assert report["clips"] == eval_json(capsys, ckpt)["clips"]  # the same clip, the same MoCap retarget
     assert main(["eval", str(ckpt), "--episodes", "1"]) == 0

@@ -40,7 +40,7 @@ def test_complexmimic_run(teacher_run, tmp_path, capsys):
     printed = capsys.readouterr().out
     assert "fine-tuning the imitation expert" in printed and "fine-tuning the interaction expert" in printed
     routing = json.loads((out / "routing.json").read_text())
-    info = routing["synth_lift_carry_seed0"]
+    info = routing["synth_lift_place_seed0"]
     assert info["group"] == ("imitation" if info["imitation_success"] >= 0.5 else "interaction")
     for kind, groups in (("imitation", ["policy"]), ("interaction", ["policy", "height_map"])):
         ckpt = next((out / "experts" / "synthetic-box" / kind).glob("model_*.pt"))
@@ -75,7 +75,7 @@ def test_skillmimic_run_and_export_refusal(teacher_run, tmp_path, capsys):
     # it evaluates with its frozen history encoder rebuilt from the run folder
     assert main(["eval", str(ckpt), "--episodes", "1", "--json"]) == 0
     report = json.loads(capsys.readouterr().out)
-    assert report["policy_kind"] == "student" and report["clips"]["synth_lift_carry_seed0"]["episodes"] == 1
+    assert report["policy_kind"] == "student" and report["clips"]["synth_lift_place_seed0"]["episodes"] == 1
 
 
 def test_ablation_run_without_reference_distillation(teacher_run, tmp_path, capsys):
