@@ -20,7 +20,7 @@ GANTRY = "sim2sim_gantry"
 PELVIS = "pelvis"
 
 
-def build_scene_bytes(embodiment: str, object_asset, *, self_collision: bool = True, density: float = 200.0,
+def build_scene_bytes(embodiment: str, object_asset, *, self_collision: bool = True, density: float = 25.0,
                       friction: float = 0.9) -> bytes:
     """Compile the validation scene for one object and return it as MJB bytes."""
     import mujoco

@@ -50,7 +50,7 @@ def run(args: argparse.Namespace) -> int:
         env_cfg = load_yaml_dataclass(InteractionEnvCfg, TASK_CONFIG)
         sources = factory.expand_sources(args.data)
         options = clip_options(args)
-        model = None
+        model = ckpt = None
     else:
         from robot_hoi.rl.checkpoint import resolve_checkpoint
 
@@ -74,7 +74,8 @@ def run(args: argparse.Namespace) -> int:
     results = {}
     for source in sources:
         clip = factory.load_source(source, options)
-        env = factory.make_env([clip], env_cfg, embodiment)
+        cache = ckpt.parent / "references" if ckpt is not None and (ckpt.parent / "references").is_dir() else None
+        env = factory.make_env([clip], env_cfg, embodiment, cache=cache)
         if model is None:
             torch.manual_seed(args.seed)
             train_cfg = load_train_config(PRESETS[args.preset])
@@ -138,6 +139,8 @@ def evaluate(env, model, stochastic: bool = False) -> dict[str, float]:
         "E_o_cm": stats["E_o_cm"].mean().item(),
         "return": returns[counted].mean().item(),
         "clip_duration_s": env.total_frames / env.references[0].fps,
+        # how executable the reference is (robot_hoi.retarget.feasibility), when the env knows
+        "reference_feasibility": (getattr(env, "reference_feasibility", None) or [None])[0],
     }
 
 

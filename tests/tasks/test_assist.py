@@ -97,3 +97,21 @@ def test_compact_observation_is_small_and_matches_its_spec(scene):
     env.cfg.teacher_obs = "nope"
     with pytest.raises(ValueError, match="teacher_obs"):
         env._observations()
+
+
+def test_failure_weighted_starts_follow_the_terminations(scene):
+    """Starts concentrate on the clip segment where episodes ended; without the option they stay uniform."""
+    env = _env(scene)
+    env.cfg.init.failure_weighted = True
+    env.cfg.init.start_range = (0.0, 1.0)
+    terminated = torch.ones(2, dtype=torch.bool)
+    env.ref_index[:] = env.clip_start[0] + 30  # frame 30 of 40: segment 15 of 20
+    for _ in range(50):
+        env._count_failures(terminated)
+    assert env.failure_counts[0, 15] == 100 and env.failure_counts.sum() == 100
+    frames = env._random_frames(torch.zeros(4000, dtype=torch.long))
+    share = ((frames >= 29) & (frames <= 31)).float().mean().item()
+    assert share > 0.5  # 101 / 120 of the weight sits on that segment (uniform would give ~0.07)
+    env.cfg.init.failure_weighted = False
+    frames = env._random_frames(torch.zeros(4000, dtype=torch.long))
+    assert ((frames >= 29) & (frames <= 31)).float().mean().item() < 0.15

@@ -157,6 +157,7 @@ class InteractionEnv:
         self.prev_object_vel = z(n, 3)
         self.episode_sums: dict[str, Tensor] = {name: z(n) for name in self.reward_weights}
         self.episode_error_h, self.episode_error_o = z(n), z(n)
+        self.failure_counts = z(len(self.references), self.cfg.init.failure_segments)
 
     # ---- VecEnv -------------------------------------------------------------------------------------------------
     def reset(self) -> dict[str, Tensor]:
@@ -184,6 +185,8 @@ class InteractionEnv:
 
         reasons = self._terminations()
         terminated = torch.stack(list(reasons.values())).any(0)
+        if self.cfg.init.failure_weighted:
+            self._count_failures(terminated)
         reached_end = self.ref_index >= self._clip_end()
         truncated = ~terminated & (reached_end | (self.episode_length >= self.max_episode_length))
         self.psi.observe(self, reward, terminated | truncated)
@@ -389,8 +392,21 @@ class InteractionEnv:
     def _random_frames(self, clip: Tensor) -> Tensor:
         lo, hi = self.cfg.init.start_range
         span = (self.clip_end[clip] - self.clip_start[clip]).float()
-        fraction = lo + (hi - lo) * torch.rand(clip.numel(), generator=self.generator, device=self.device)
+        uniform = torch.rand(clip.numel(), generator=self.generator, device=self.device)
+        if self.cfg.init.failure_weighted:  # a segment in proportion to its failures, uniform inside it
+            segments = self.failure_counts.shape[1]
+            segment = torch.multinomial(self.failure_counts[clip] + 1.0, 1, generator=self.generator)[:, 0]
+            uniform = (segment.float() + uniform) / segments
+        fraction = lo + (hi - lo) * uniform
         return self.clip_start[clip] + (fraction * span).long()
+
+    def _count_failures(self, terminated: Tensor) -> None:
+        """Terminations per clip segment, for failure-weighted starts (a sum over envs: no host sync)."""
+        clip = self.clip_id
+        span = (self.clip_end[clip] - self.clip_start[clip]).clamp(min=1).float()
+        segments = self.failure_counts.shape[1]
+        segment = ((self.ref_index - self.clip_start[clip]).float() / span * segments).long().clamp(0, segments - 1)
+        self.failure_counts.index_put_((clip, segment), terminated.float(), accumulate=True)
 
     def _reference_states(self, frames: Tensor) -> Tensor:
         """Robot + object states of the IK reference at `frames`, with joint noise (RSI) on the actuated body

@@ -59,6 +59,10 @@ class InitCfg:
     spawn_noise_xy: float = 0.05           # m, stand start placement noise
     joint_noise: float = 0.05              # rad, reference-state initialisation noise
     start_range: tuple[float, float] = (0.0, 1.0)  # clip fraction from which reference starts are drawn
+    # Failure-weighted starts: reference starts drawn per clip segment in proportion to (1 + terminations seen in
+    # that segment), so training spends its samples where episodes end (BeyondMimic's adaptive sampling).
+    failure_weighted: bool = False
+    failure_segments: int = 20
 
 
 @dataclass
@@ -96,7 +100,7 @@ class InteractionEnvCfg:
     warmup_frames: int = 15                 # stand-and-approach frames (supp. F)
     max_episode_frames: int = 300           # supp. Table C
     reference_links: str = "ik"             # "ik" (robot-reachable link targets) | "scaled_human" (pure InterMimic)
-    object_density: float = 200.0           # kg/m^3 (supp. Table A); a clip object's own known mass wins
+    object_density: float = 25.0            # kg/m^3 of the hull (InterMimic's G1 setting); a known mass wins
     object_friction: float = 0.9            # supp. Table A
     object_surface_points: int = 256        # samples for d_t
     self_collision: bool = False

@@ -115,7 +115,9 @@ def make_env(clips: list, env_cfg: InteractionEnvCfg, embodiment, cache: Path | 
                              density=env_cfg.object_density, friction=env_cfg.object_friction)
     motions = motions or [load_or_retarget(c, embodiment, cache) for c in clips]
     references = [build_reference(c, m, env_cfg.reference_links) for c, m in zip(clips, motions, strict=True)]
-    return InteractionEnv(env_cfg, scene, references)
+    env = InteractionEnv(env_cfg, scene, references)
+    env.reference_feasibility = [m.meta.get("feasibility") or kinematic_report(m, embodiment) for m in motions]
+    return env
 
 
 def write_task(run_dir: Path, sources: list[str], env_cfg: InteractionEnvCfg, embodiment_name: str,

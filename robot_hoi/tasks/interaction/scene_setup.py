@@ -15,7 +15,7 @@ HAND_LINK_MARKERS = ("_tip", "hand_base")
 
 
 class InteractionScene:
-    def __init__(self, embodiment, object_asset, *, self_collision: bool = False, density: float = 200.0,
+    def __init__(self, embodiment, object_asset, *, self_collision: bool = False, density: float = 25.0,
                  friction: float = 0.9, timestep: float | None = None):
         from robot_hoi.embodiment import build_robot_spec
 
