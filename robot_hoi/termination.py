@@ -12,7 +12,7 @@ from dataclasses import dataclass
 _EPS = 1e-4
 
 
-@dataclass(frozen=True)
+@dataclass
 class Thresholds:
     """The thresholds as written (configs/tasks/interaction.yaml `terminations`)."""
 
