@@ -62,6 +62,7 @@ class HandsReading:
     ages: np.ndarray  # (2,) s each side has left its latest request unanswered (0: answered)
     rad: np.ndarray  # (12,) the angles as joint radians
     faults: list[str] = field(default_factory=list)  # problems the runtime must act on, e.g. "left: link lost: ..."
+    every_n_ticks: int = 1  # the hands are exchanged every n-th tick: an answer may take n periods
 
 
 @dataclass
@@ -340,6 +341,7 @@ class Hands:
             ages=np.array([s.age(now) for s in self.sides]),
             rad=self.rad_from_units(angles),
             faults=faults,
+            every_n_ticks=self.every_n_ticks,
         )
 
     def command_rates(self, window_s: float) -> dict[str, float]:

@@ -95,7 +95,7 @@ def input_faults(
         else:
             faults.extend(joint_limit_faults(np.concatenate([body.q, hands.rad]), contract, config.joint_limit_margin))
     for side, age in zip(("left", "right"), hands.ages, strict=True):
-        if age > max_age:  # the hand's own silence since its last answered request, not the loop's lateness
+        if age > max_age * hands.every_n_ticks:  # the hand's own silence since it was asked, not loop lateness
             faults.append(f"{side} hand state stale ({age * 1e3:.1f} ms without an answer)")
     faults.extend(hands.faults)
     if need_tracker:
