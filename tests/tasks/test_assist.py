@@ -53,7 +53,8 @@ def test_object_assist_carries_the_object_toward_its_reference(scene):
     share of the weight) holds it near the reference. The same env with the curriculum off has no wrench at all."""
     heights = {}
     for name, level in (("off", 0.0), ("on", 1.0)):
-        env = _env(scene, enabled=True, object_kp=400.0, object_kd=40.0, object_gravity_share=1.0)
+        env = _env(scene, enabled=True, object_kp=400.0, object_kd=40.0, object_gravity_share=1.0,
+                   assisted_share=1.0)
         env.reset()
         qpos, qvel = env.backend.qpos.clone(), env.backend.qvel.clone()
         qpos[:, env.layout.object_qpos + 2] += 0.2
@@ -115,3 +116,25 @@ def test_failure_weighted_starts_follow_the_terminations(scene):
     env.cfg.init.failure_weighted = False
     frames = env._random_frames(torch.zeros(4000, dtype=torch.long))
     assert ((frames >= 29) & (frames <= 31)).float().mean().item() < 0.15
+
+
+def test_only_the_episodes_drawn_to_be_assisted_get_wrenches(scene):
+    from robot_hoi.tasks.interaction.mdp.assist import assist_wrench
+
+    env = _env(scene, enabled=True, assisted_share=0.5)
+    env.cfg.num_envs = env.num_envs
+    env.reset()
+    env.assisted[:] = torch.tensor([1.0, 0.0])
+    qpos = env.backend.qpos.clone()
+    qpos[:, env.layout.object_qpos + 2] += 0.2
+    env.backend.set_state(torch.arange(2), qpos, env.backend.qvel.clone())
+    env._update_state()
+    wrench = assist_wrench(env, 1.0)
+    assert wrench[0].abs().sum() > 0 and wrench[1].abs().sum() == 0
+    draws = []
+    for _ in range(20):
+        env._reset_envs(torch.arange(2))
+        draws.append(env.assisted.clone())
+    share = torch.stack(draws).mean().item()
+    assert 0.2 < share < 0.8
+

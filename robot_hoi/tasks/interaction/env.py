@@ -7,7 +7,8 @@ composes them. All tensors are batched over environments; no per-environment Pyt
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
+from types import SimpleNamespace
 
 import torch
 from torch import Tensor
@@ -22,6 +23,7 @@ from robot_hoi.tasks.interaction.mdp import terminations as term_terms
 from robot_hoi.tasks.interaction.psi import PsiBuffer
 from robot_hoi.tasks.interaction.reference import ReferenceMotion, nearest_surface_vectors
 from robot_hoi.tasks.interaction.scene_setup import InteractionScene
+from robot_hoi.utils.timing import OFF
 from robot_hoi.utils.torch_rot import quat_apply, quat_apply_inverse, quat_mul, quat_to_matrix, yaw_quat
 
 
@@ -71,6 +73,7 @@ class InteractionEnv:
         self.dt = self.backend.control_dt
         self.generator = torch.Generator(device=self.device).manual_seed(cfg.seed)
         self.start_sampler = None  # optional: chooses reset clips/states (StartPlan); e.g. the student's samplers
+        self.timers = OFF  # a robot_hoi.utils.timing.Timers splits step() into stages (bench/train_throughput.py)
         layout = scene.layout
         self.layout = layout
         self.num_actions = len(layout.actuator_names)
@@ -158,6 +161,7 @@ class InteractionEnv:
         self.episode_sums: dict[str, Tensor] = {name: z(n) for name in self.reward_weights}
         self.episode_error_h, self.episode_error_o = z(n), z(n)
         self.failure_counts = z(len(self.references), self.cfg.init.failure_segments)
+        self.assisted = z(n)  # 1 where this episode gets the assist wrenches (drawn per episode)
 
     # ---- VecEnv -------------------------------------------------------------------------------------------------
     def reset(self) -> dict[str, Tensor]:
@@ -165,10 +169,13 @@ class InteractionEnv:
         return self._observations()
 
     def step(self, actions: Tensor):
+        timers = self.timers
+        timers.start()
         self.actions = actions.detach().clamp(-self.cfg.action_clip, self.cfg.action_clip)
         targets = self.action_offset() + self.action_scale * self.actions
         wrench = assist_terms.assist_wrench(self, self.assist_level) if self.assist_level > 0 else None
         self.backend.step(torch.maximum(torch.minimum(targets, self.ctrl_high), self.ctrl_low), wrench)
+        timers.lap("physics")
         self.episode_length += 1
         in_warmup = self.warmup_left > 0
         self.warmup_left = (self.warmup_left - 1).clamp(min=0)
@@ -195,13 +202,18 @@ class InteractionEnv:
         extras = {"log": self._episode_log(done, stats), "episode": stats}
         if terminated.any():
             extras["log"].update({f"Termination/{k}": v[terminated].float().mean() for k, v in reasons.items()})
+        timers.lap("state_rewards_terminations")
         if truncated.any():
             extras["final_obs"] = self._observations()
         self.last_actions = self.actions.clone()
+        timers.lap("observations")
         done_ids = done.nonzero().flatten()
         if done_ids.numel():
             self._reset_envs(done_ids)
-        return self._observations(), reward, terminated, truncated, extras
+        timers.lap("resets")
+        obs = self._observations()
+        timers.lap("observations")
+        return obs, reward, terminated, truncated, extras
 
     # ---- curriculum ---------------------------------------------------------------------------------------------
     def update_curriculum(self, total_samples: int) -> dict[str, float]:
@@ -226,42 +238,65 @@ class InteractionEnv:
     def _clip_end(self) -> Tensor:
         return self.clip_end[self.clip_id]
 
-    def _update_state(self) -> None:
+    def _update_state(self, env_ids: Tensor | None = None) -> None:
+        """The state the terms read, from the backend's qpos, qvel and sensors (each read once). `env_ids`: only
+        these rows are recomputed (after their reset); the other rows keep their values, which are what a full
+        update would give again (their physics state and reference index did not change). Rows are computed
+        independently of each other, so the result is the same bit for bit (tests/tasks/test_state_update.py)."""
+        if env_ids is None:
+            self._compute_state(self, None)
+            return
+        rows = SimpleNamespace()
+        self._compute_state(rows, env_ids)
+        for name, value in vars(rows).items():  # new tensors: a kept reference to the old ones stays unchanged
+            old = getattr(self, name)
+            if isinstance(value, ReferenceFrame):
+                value = ReferenceFrame(**{f.name: getattr(old, f.name).index_copy(0, env_ids, getattr(value, f.name))
+                                          for f in fields(ReferenceFrame)})
+            else:
+                value = old.index_copy(0, env_ids, value)
+            setattr(self, name, value)
+
+    def _compute_state(self, s, env_ids: Tensor | None) -> None:
+        """Set the state attributes on `s` (the env itself, or a namespace for the rows `env_ids`)."""
         lay = self.layout
         qpos = self.backend.qpos.to(torch.float32)
         qvel = self.backend.qvel.to(torch.float32)
         sens = self.backend.sensordata.to(torch.float32)
-        n, nl = self.num_envs, lay.num_links
-        self.root_pos, self.root_quat = qpos[:, 0:3], qpos[:, 3:7]
-        self.root_lin_vel, self.root_ang_vel = qvel[:, 0:3], qvel[:, 3:6]
-        self.joint_pos = qpos[:, lay.actuator_qpos]
-        self.joint_vel = qvel[:, lay.actuator_dof]
-        self.object_pos = qpos[:, lay.object_qpos:lay.object_qpos + 3]
-        self.object_quat = qpos[:, lay.object_qpos + 3:lay.object_qpos + 7]
-        self.object_lin_vel = qvel[:, lay.object_dof:lay.object_dof + 3]
+        ref_index = self.ref_index
+        if env_ids is not None:
+            qpos, qvel, sens, ref_index = qpos[env_ids], qvel[env_ids], sens[env_ids], ref_index[env_ids]
+        n, nl = qpos.shape[0], lay.num_links
+        s.root_pos, s.root_quat = qpos[:, 0:3], qpos[:, 3:7]
+        s.root_lin_vel, s.root_ang_vel = qvel[:, 0:3], qvel[:, 3:6]
+        s.joint_pos = qpos[:, lay.actuator_qpos]
+        s.joint_vel = qvel[:, lay.actuator_dof]
+        s.object_pos = qpos[:, lay.object_qpos:lay.object_qpos + 3]
+        s.object_quat = qpos[:, lay.object_qpos + 3:lay.object_qpos + 7]
+        s.object_lin_vel = qvel[:, lay.object_dof:lay.object_dof + 3]
         # free-joint angular velocity is in the body frame; the observation wants it in world axes
-        self.object_rotmat = quat_to_matrix(self.object_quat)
-        self.object_ang_vel = (self.object_rotmat @ qvel[:, lay.object_dof + 3:lay.object_dof + 6, None])[..., 0]
-        self.link_pos = sens[:, lay.link_pos].reshape(n, nl, 3)
-        self.link_quat = sens[:, lay.link_quat].reshape(n, nl, 4)
-        self.link_rotmat = quat_to_matrix(self.link_quat)
-        self.root_rotmat = quat_to_matrix(self.root_quat)
-        self.heading_matrix = quat_to_matrix(yaw_quat(self.root_quat))
-        self.link_vel = sens[:, lay.link_vel].reshape(n, nl, 3)
+        s.object_rotmat = quat_to_matrix(s.object_quat)
+        s.object_ang_vel = (s.object_rotmat @ qvel[:, lay.object_dof + 3:lay.object_dof + 6, None])[..., 0]
+        s.link_pos = sens[:, lay.link_pos].reshape(n, nl, 3)
+        s.link_quat = sens[:, lay.link_quat].reshape(n, nl, 4)
+        s.link_rotmat = quat_to_matrix(s.link_quat)
+        s.root_rotmat = quat_to_matrix(s.root_quat)
+        s.heading_matrix = quat_to_matrix(yaw_quat(s.root_quat))
+        s.link_vel = sens[:, lay.link_vel].reshape(n, nl, 3)
         contact = sens[:, lay.contact].reshape(n, -1, 4)
-        self.contact_found = contact[..., 0] > 0
-        self.contact_force = contact[..., 1:]
-        self.hand_contact_found = self.contact_found[:, self.scene.hand_contact_ids]
-        self.finger_contact_found = self.contact_found[:, self.scene.finger_contact_ids]
+        s.contact_found = contact[..., 0] > 0
+        s.contact_force = contact[..., 1:]
+        s.hand_contact_found = s.contact_found[:, self.scene.hand_contact_ids]
+        s.finger_contact_found = s.contact_found[:, self.scene.finger_contact_ids]
 
         # surface samples in world: p R^T + o (row vectors)
-        self.object_points_world = self.object_points @ self.object_rotmat.transpose(-1, -2) + self.object_pos[:, None]
-        self.d = nearest_surface_vectors(self.link_pos, self.object_points_world)
-        self.ref = self.reference_at(0)
-        self.ref_heading_matrix = quat_to_matrix(yaw_quat(self.ref.root_quat_wxyz))
-        self.ref_object_points_world = self.object_points @ self.ref.object_rotmat.transpose(-1, -2) + \
-            self.ref.object_pos[:, None]
-        self.w_d = termination.interaction_weights(self.d, self.ref.d_hat)
+        s.object_points_world = self.object_points @ s.object_rotmat.transpose(-1, -2) + s.object_pos[:, None]
+        s.d = nearest_surface_vectors(s.link_pos, s.object_points_world)
+        s.ref = reference_frame(self, ref_index)
+        s.ref_heading_matrix = quat_to_matrix(yaw_quat(s.ref.root_quat_wxyz))
+        s.ref_object_points_world = self.object_points @ s.ref.object_rotmat.transpose(-1, -2) + \
+            s.ref.object_pos[:, None]
+        s.w_d = termination.interaction_weights(s.d, s.ref.d_hat)
 
     def _update_history(self) -> None:
         """What accumulates over steps, once per env step (never on resets): finite-difference accelerations
@@ -277,14 +312,7 @@ class InteractionEnv:
 
     def reference_at(self, k: int) -> ReferenceFrame:
         idx = torch.minimum(self.ref_index + k, self._clip_end()) if k else self.ref_index
-        return ReferenceFrame(
-            link_pos=self.ref_link_pos[idx], link_quat_wxyz=self.ref_link_quat[idx], d_hat=self.ref_d_hat[idx],
-            object_pos=self.ref_object_pos[idx], object_quat_wxyz=self.ref_object_quat[idx],
-            hand_contact=self.ref_hand_contact[idx], hand_distance=self.ref_hand_distance[idx],
-            root_pos=self.ref_robot_qpos[idx, 0:3], root_quat_wxyz=self.ref_robot_qpos[idx, 3:7],
-            joint_pos=self.ref_joint_pos[idx], link_rotmat=self.ref_link_rotmat[idx],
-            object_rotmat=self.ref_object_rotmat[idx], root_rotmat=self.ref_root_rotmat[idx],
-        )
+        return reference_frame(self, idx)
 
     def _terminations(self) -> dict[str, Tensor]:
         return term_terms.interaction_terminations(self, self.cfg.terminations)
@@ -376,6 +404,8 @@ class InteractionEnv:
         if custom_ids.numel():
             self.warmup_left[env_ids[custom_ids]] = plan.hold[custom_ids]
         self.episode_length[env_ids] = 0
+        self.assisted[env_ids] = (torch.rand(n, generator=self.generator, device=self.device)
+                                  < self.cfg.assist.assisted_share).float()
         self.tracked_steps[env_ids] = 0
         self.start_frame[env_ids] = frame
         self.contact_loss_frames[env_ids] = 0
@@ -384,7 +414,7 @@ class InteractionEnv:
             s[env_ids] = 0.0
         self.episode_error_h[env_ids] = 0.0
         self.episode_error_o[env_ids] = 0.0
-        self._update_state()
+        self._update_state(None if n == self.num_envs else env_ids)  # env_ids are distinct: n == all of them
         self.prev_link_vel[env_ids] = self.link_vel[env_ids]
         self.prev_object_vel[env_ids] = self.object_lin_vel[env_ids]
         self.psi.on_reset(env_ids)
@@ -451,6 +481,18 @@ class InteractionEnv:
         if self.cfg.student_obs_terms:
             groups["student"] = obs_terms.student_observation(self)
         return groups
+
+
+def reference_frame(ref, idx: Tensor) -> ReferenceFrame:
+    """The reference at absolute frames `idx` of `ref`'s ref_* tensors (an env, or a timeline laid out like one)."""
+    return ReferenceFrame(
+        link_pos=ref.ref_link_pos[idx], link_quat_wxyz=ref.ref_link_quat[idx], d_hat=ref.ref_d_hat[idx],
+        object_pos=ref.ref_object_pos[idx], object_quat_wxyz=ref.ref_object_quat[idx],
+        hand_contact=ref.ref_hand_contact[idx], hand_distance=ref.ref_hand_distance[idx],
+        root_pos=ref.ref_robot_qpos[idx, 0:3], root_quat_wxyz=ref.ref_robot_qpos[idx, 3:7],
+        joint_pos=ref.ref_joint_pos[idx], link_rotmat=ref.ref_link_rotmat[idx],
+        object_rotmat=ref.ref_object_rotmat[idx], root_rotmat=ref.ref_root_rotmat[idx],
+    )
 
 
 def _subsample(points: Tensor, count: int) -> Tensor:

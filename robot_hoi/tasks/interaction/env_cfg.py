@@ -82,6 +82,10 @@ class AssistCfg:
     object_kp_rot: float = 5.0
     object_kd_rot: float = 0.3
     object_gravity_share: float = 0.5  # of the object's weight carried by the assist at full level
+    # Share of episodes that get the assist at all (drawn per episode, not observed by the policy): the others
+    # train the policy to balance on its own from the start. With every episode assisted the policy learned to
+    # lean on the pelvis wrench and its unassisted eval duration fell from 2.4 s to 0.8 s (measured, lift_place).
+    assisted_share: float = 0.5
 
 
 @dataclass

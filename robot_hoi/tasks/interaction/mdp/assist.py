@@ -42,7 +42,7 @@ def assist_wrench(env, level: float) -> Tensor:
         cfg.object_kp, cfg.object_kd, cfg.object_kp_rot, cfg.object_kd_rot)
     obj[:, 2] += level * cfg.object_gravity_share * env.object_mass * 9.81  # carry part of the object's weight
     wrench[:, env.scene.object_body_id()] = obj
-    return wrench
+    return wrench * env.assisted[:, None, None]  # only the episodes drawn to be assisted
 
 
 def assist_level(cfg, total_samples: int) -> float:
