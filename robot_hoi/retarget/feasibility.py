@@ -1,7 +1,9 @@
 """Can the robot execute a retargeted motion? Kinematic checks of a RobotMotion on the embodiment's model.
 
-- foot slide: horizontal travel of each foot's sole while it is within `contact_height` of the floor (a planted
-  foot should not move; a tracking policy cannot follow a sliding one without slipping);
+- foot slide: horizontal travel of each foot's sole over the frames its target is planted (the human's foot is
+  down and still: retarget.targets.planted) and the sole is within `contact_height` of the floor (a planted foot
+  should not move; a tracking policy cannot follow a sliding one without slipping). Lift-off and touch-down frames
+  of a step are not slides;
 - centre of mass outside support: share of frames whose whole-body CoM (projected on the floor) lies outside
   the convex hull of the sole points touching the floor, by more than `com_margin`;
 - peak and p99 joint speed of the actuated body joints (what reference-state starts copy as velocities).
@@ -35,9 +37,12 @@ def foot_sole_world(model: mujoco.MjModel, qpos: np.ndarray, foot_bodies: list[s
     return out
 
 
-def foot_slide(soles: np.ndarray, contact_height: float = 0.01) -> float:
-    """Horizontal travel (m) of a foot's sole centre summed over consecutive frames that both touch the floor."""
+def foot_slide(soles: np.ndarray, contact_height: float = 0.01, planted: np.ndarray | None = None) -> float:
+    """Horizontal travel (m) of a foot's sole centre summed over consecutive frames that both touch the floor (and,
+    with `planted` (T,) given, where the reference plants the foot in both)."""
     low = soles[..., 2].min(-1) < contact_height
+    if planted is not None:
+        low = low & planted
     centre = soles[..., :2].mean(-2)
     both = low[1:] & low[:-1]
     return float(np.linalg.norm(np.diff(centre, axis=0), axis=-1)[both].sum())
@@ -70,8 +75,14 @@ def support_distance(com_xy: np.ndarray, contact_points_xy: np.ndarray) -> float
 def kinematic_feasibility(model: mujoco.MjModel, motion, foot_bodies: list[str], body_joint_ids: list[int],
                           contact_height: float = 0.01, com_margin: float = 0.0) -> dict:
     """Foot slide, CoM-outside-support share and joint speeds of a RobotMotion (see the module docstring)."""
+    from robot_hoi.retarget.targets import TargetMapping, planted
+
     soles = foot_sole_world(model, motion.qpos, foot_bodies)
-    slide = {name: round(100 * foot_slide(track, contact_height), 2) for name, track in soles.items()}
+    names = list(motion.link_names)
+    rule = TargetMapping()
+    down = {name: planted(motion.target_pos[:, [names.index(name)]], motion.fps, rule.pin_height,
+                          rule.pin_speed)[:, 0] if name in names else None for name in foot_bodies}
+    slide = {name: round(100 * foot_slide(track, contact_height, down[name]), 2) for name, track in soles.items()}
     com = com_track(model, motion.qpos)
     points = np.concatenate(list(soles.values()), axis=1)  # (T, P, 3)
     outside = []

@@ -82,6 +82,12 @@ class TargetMapping:
     anchor_weight: float = 2.0  # added to a link's weight in proportion to its anchor weight a
     scale_object_height: bool = True  # False keeps the object's real height (then z_rest plays no role)
     object_clearance: float | None = 0.01  # m: anchored points inside the object's hull go out to this; None: off
+    # Planted feet: a foot link within pin_height of its lowest height and slower than pin_speed (robot space) is
+    # on the floor; over each such stretch its target is held at the stretch's mean position and its IK weight
+    # raised by pin_weight, so the IK solution does not slide it either. pin_weight 0: off.
+    pin_height: float = 0.03  # m
+    pin_speed: float = 0.25  # m/s
+    pin_weight: float = 10.0
     group_weights: dict[str, float] = field(
         default_factory=lambda: {
             "pelvis": 3.0, "legs": 1.0, "feet": 2.0, "torso": 1.0, "head": 0.3,
@@ -239,6 +245,27 @@ def map_positions(
     return targets, a, obj_robot, dist
 
 
+def planted(foot_pos: np.ndarray, fps: float, height: float, speed: float) -> np.ndarray:
+    """(T, F) bool: each foot link (T, F, 3) near its lowest height and slow horizontally."""
+    low = foot_pos[..., 2] < foot_pos[..., 2].min(axis=0) + height
+    vel = np.linalg.norm(np.gradient(foot_pos[..., :2], 1.0 / fps, axis=0), axis=-1)
+    return low & (vel < speed)
+
+
+def pin_feet(pos: np.ndarray, weight: np.ndarray, feet: list[int], fps: float, mapping: TargetMapping) -> None:
+    """In place: over each planted stretch of a foot link, its target is the stretch's mean position (a planted
+    foot does not move) and its weight rises by pin_weight."""
+    if mapping.pin_weight <= 0 or not feet:
+        return
+    down = planted(pos[:, feet], fps, mapping.pin_height, mapping.pin_speed)
+    for column, link in enumerate(feet):
+        flags = np.concatenate([[False], down[:, column], [False]])
+        starts, ends = np.flatnonzero(~flags[:-1] & flags[1:]), np.flatnonzero(flags[:-1] & ~flags[1:])
+        for a, b in zip(starts, ends, strict=True):
+            pos[a:b, link] = pos[a:b, link].mean(axis=0)
+            weight[a:b, link] += mapping.pin_weight
+
+
 def xyzw_to_wxyz(q: np.ndarray) -> np.ndarray:
     return np.concatenate([q[..., 3:4], q[..., :3]], axis=-1)
 
@@ -288,6 +315,7 @@ def targets_from_clip(clip, cfg, scale: float | None = None, mapping: TargetMapp
     groups = [link_group(h) for h in link_map.values()]
     base_w = np.array([mapping.group_weights[g] for g in groups])
     weight = base_w[None, :] + mapping.anchor_weight * a
+    pin_feet(pos, weight, [i for i, g in enumerate(groups) if g == "feet"], float(clip.fps), mapping)
     return RobotTargets(
         fps=float(clip.fps),
         link_names=tuple(link_map.keys()),

@@ -54,3 +54,29 @@ def test_synthetic_lift_place_reference_is_executable():
     assert max(f["foot_slide_cm"].values()) < 6.0
     assert f["com_outside_support_fraction"] < 0.05
     assert f["joint_speed_p99_rad_s"] < 12.0
+
+
+def test_planted_feet_are_pinned():
+    """A foot target that jitters while down is held at its stretch's mean with a raised IK weight; a moving foot
+    is left alone."""
+    from robot_hoi.retarget.targets import TargetMapping, pin_feet, planted
+
+    fps = 30.0
+    t = np.arange(60)
+    pos = np.zeros((60, 2, 3))
+    pos[:, 0, 0] = 0.004 * np.sin(t)            # link 0: down, jittering by 4 mm
+    pos[:, 1, 0] = np.linspace(0.0, 1.2, 60)    # link 1: moving 0.6 m/s (walking, not planted)
+    pos[:, 1, 2] = 0.1
+    weight = np.ones((60, 2))
+    assert planted(pos, fps, 0.03, 0.25)[:, 0].all() and not planted(pos, fps, 0.03, 0.25)[:, 1].any()
+    pin_feet(pos, weight, [0, 1], fps, TargetMapping())
+    assert np.ptp(pos[:, 0, 0]) == 0.0 and (weight[:, 0] == 11.0).all()
+    np.testing.assert_allclose(pos[:, 1, 0], np.linspace(0.0, 1.2, 60))
+    assert (weight[:, 1] == 1.0).all()
+
+
+def test_foot_slide_ignores_steps_when_told_where_feet_are_planted():
+    soles = np.zeros((4, 3, 3))
+    soles[:, :, 0] = np.array([0.0, 0.1, 0.3, 0.3])[:, None]
+    planted_flags = np.array([False, False, True, True])  # the first moves are a step's lift-off, not a slide
+    assert foot_slide(soles, planted=planted_flags) == pytest.approx(0.0)
