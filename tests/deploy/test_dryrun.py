@@ -14,7 +14,7 @@ from deploy.safety import Phase
 
 # Staleness is tested on the fake clock; a generous limit keeps these real-time runs stable on a busy machine.
 # Overruns and the hand rate are tested on the fake clock too; here only a grossly broken run may trip them.
-FAST = ["--zero-torque-s", "0.1", "--ramp-s", "0.3", "--damp-s", "0.2", "--auto-start", "--max-input-age-periods", "6",
+FAST = ["--zero-torque-s", "0.1", "--ramp-s", "0.3", "--damp-s", "0.2", "--auto-start", "--max-input-age-periods", "10",
         "--hand-timeout", "0.1", "--max-overruns", "1000", "--min-hand-rate-share", "0.2", "--status", "plain"]
 
 

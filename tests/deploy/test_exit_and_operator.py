@@ -88,7 +88,7 @@ def test_real_body_stays_limp_until_the_operator_confirms(dev_policy, tmp_path):
         [sys.executable, "-m", "deploy", "--policy", str(dev_policy), "--dds-interface", "lo", "--dds-domain",
          str(domain), "--tracker", "sim", "--hand-port", sims[0].port, sims[1].port, "--duration", "60",
          "--log-dir", str(tmp_path), "--zero-torque-s", "0.1", "--ramp-s", "0.3", "--damp-s", "0.2",
-         "--max-input-age-periods", "6", "--hand-timeout", "0.1", "--max-overruns", "1000", "--min-hand-rate-share",
+         "--max-input-age-periods", "10", "--hand-timeout", "0.1", "--max-overruns", "1000", "--min-hand-rate-share",
          "0.2", "--status", "plain"],
         cwd=REPO, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
@@ -198,13 +198,13 @@ def test_slcan_stream_garbled_mid_policy_damps_with_a_summary_not_a_traceback(de
         threading.Thread(target=garble_once_policy_runs, daemon=True).start()
         code = deploy_main(["--dry-run", "--policy", str(dev_policy), "--hand-bus", "can", "--can-interface",
                             "slcan", "--can-channel", adapter.port, "--duration", "30", "--log-dir", str(tmp_path),
-                            *FAST, "--hand-timeout", "0.3", "--max-input-age-periods", "30"])
+                            *FAST, "--hand-timeout", "0.3", "--hand-retries", "4", "--max-input-age-periods", "30"])
     finally:
         adapter.stop()
         left.stop()
         right.stop()
     err = capsys.readouterr().err
-    assert "Traceback" not in err
+    assert "Traceback" not in err and code != 2, err
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert code == 1 and summary["outcome"] == "FAULT" and summary["policy_steps"] > 0, summary["faults"]
     assert summary["final_phase"] == "DAMP" and any("hand" in f for f in summary["faults"]), summary["faults"]

@@ -42,7 +42,7 @@ SCRIPT = textwrap.dedent('''
 def test_every_deploy_module_imports_and_dry_run_works_without_heavy_packages(dev_policy, tmp_path):
     argv = ["--dry-run", "--policy", str(dev_policy), "--duration", "2.0", "--log-dir", str(tmp_path),
             "--zero-torque-s", "0.1", "--ramp-s", "0.3", "--damp-s", "0.2", "--auto-start", "--hand-bus", "can",
-            "--max-input-age-periods", "6", "--hand-timeout", "0.1", "--max-overruns", "1000",
+            "--max-input-age-periods", "10", "--hand-timeout", "0.1", "--max-overruns", "1000",
             "--min-hand-rate-share", "0.2"]
     proc = subprocess.run([sys.executable, "-c", SCRIPT, *argv], cwd=REPO, capture_output=True, text=True,
                           timeout=120)
