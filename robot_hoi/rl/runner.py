@@ -37,6 +37,7 @@ from robot_hoi.rl.ppo import PPO
 from robot_hoi.rl.progress import progress_text, training_progress
 from robot_hoi.rl.step_log import StepLog
 from robot_hoi.utils.atomic import atomic_write_text
+from robot_hoi.utils.timing import OFF
 
 _PPO_SCALARS = {
     "surrogate_loss": "Loss/surrogate",
@@ -68,6 +69,8 @@ class OnPolicyRunner:
         self.device = torch.device(device)
         self.log_dir = Path(log_dir) if log_dir is not None else None
         self.on_checkpoint: Callable[[Path], None] | None = None  # after each periodic save (Ray mirroring)
+        # a robot_hoi.utils.timing.Timers (shared with the env) splits the loop's wall time into stages
+        self.timers = OFF
         torch.manual_seed(cfg.seed)
         rc = cfg.runner
         self.actor_dim = group_dim(env, rc.actor_obs_groups, "actor")
@@ -148,15 +151,18 @@ class OnPolicyRunner:
         batch = self.alg.storage.batch_size
         samples = iterations = 0
         last_saved = -1
+        self.timers.start()
         while True:
             self._on_iteration_start()
             curriculum = self._update_curriculum()
             t0 = time.monotonic()
             env_logs = self._rollout()
+            self.timers.lap("logging")  # the rollout's one read-back of its log values
             env_logs.update(curriculum)
             t1 = time.monotonic()
             stats = self.alg.update()
             t2 = time.monotonic()
+            self.timers.lap("update")
             self.iteration += 1
             iterations += 1
             samples += batch
@@ -174,6 +180,7 @@ class OnPolicyRunner:
                 completed=int(1000 * budget.fraction_done(elapsed, samples, iterations)),
                 description=progress_text(self.iteration, batch / max(t2 - t0, 1e-9), scalars),
             )
+            self.timers.lap("logging")
             if budget.exhausted(elapsed, samples, iterations):
                 break
         return last_saved
@@ -194,6 +201,7 @@ class OnPolicyRunner:
         for _ in range(self.cfg.ppo.horizon):
             actor_obs, critic_obs, extra_obs = self._split(self._obs)
             actions = self._select_actions(actor_obs, critic_obs, extra_obs)
+            self.timers.lap("policy")
             obs, rewards, terminated, truncated, extras = self.env.step(actions.to(self.env.device))
             rewards = rewards.to(self.device, torch.float32)
             terminated = terminated.to(self.device, torch.bool)
@@ -216,7 +224,9 @@ class OnPolicyRunner:
                 log.add(name, value)
             for name, value in extras.get("episode_done", {}).items():
                 log.add(f"Episode/{name}", value)
+            self.timers.lap("storage")
         self.alg.compute_returns(concat_groups(self._obs, critic_groups))
+        self.timers.lap("update")
         means, returns, lengths = log.to_host(torch.stack(ended_returns), torch.stack(ended_lengths))
         self.recent_returns.extend(returns)
         self.recent_lengths.extend(lengths)

@@ -59,6 +59,7 @@ class MujocoCpuBackend(PhysicsBackend):
         self._state = np.tile(initial, (num_envs, 1))
         self._sensordata = np.tile(data.sensordata, (num_envs, 1))
         self._ctrl = np.zeros((num_envs, decimation, model.nu))
+        self._ctrl_t = torch.from_numpy(self._ctrl)  # the step writes controls through this view: no temporaries
         self._ctrl_wrench: np.ndarray | None = None  # allocated on the first step with wrenches
         self._state_out = np.zeros((num_envs, decimation, self.nstate))
         self._sens_out = np.zeros((num_envs, decimation, model.nsensordata))
@@ -79,7 +80,7 @@ class MujocoCpuBackend(PhysicsBackend):
 
     # ---- stepping ---------------------------------------------------------------------------------------------
     def step(self, ctrl: Tensor, wrench: Tensor | None = None) -> None:
-        self._ctrl[:] = ctrl.detach().to(torch.float64).cpu().numpy()[:, None, :]
+        self._ctrl_t.copy_(ctrl.detach()[:, None, :])  # converted to float64 and held over the sub-steps in one copy
         control, spec = self._ctrl, _CTRL_SPEC
         # Once wrenches were applied they are always passed (zeros when None): the pool's MjData keep
         # xfrc_applied between calls, and a stale one would keep pushing.
@@ -87,8 +88,11 @@ class MujocoCpuBackend(PhysicsBackend):
             if self._ctrl_wrench is None:
                 self._ctrl_wrench = np.zeros((self.num_envs, self.decimation, self.model.nu + 6 * self.model.nbody))
             self._ctrl_wrench[:, :, : self.model.nu] = self._ctrl
-            self._ctrl_wrench[:, :, self.model.nu:] = 0.0 if wrench is None else \
-                wrench.detach().to(torch.float64).cpu().numpy().reshape(self.num_envs, 1, -1)
+            if wrench is None:
+                self._ctrl_wrench[:, :, self.model.nu:] = 0.0
+            else:
+                torch.from_numpy(self._ctrl_wrench[:, :, self.model.nu:]).copy_(
+                    wrench.detach().reshape(self.num_envs, 1, -1))
             control, spec = self._ctrl_wrench, _CTRL_SPEC | mujoco.mjtState.mjSTATE_XFRC_APPLIED.value
         self._pool.rollout(
             self._models, self._datas, self._state, control, control_spec=spec,
