@@ -177,4 +177,4 @@ def test_finite_difference_accelerations_match_the_cpu_backend():
         warp.step(actions.to(warp.device))
         assert warp.link_acc.abs().max() > 10.0  # the robot's links accelerate by tens of m/s^2 here
         torch.testing.assert_close(warp.link_acc.cpu(), cpu.link_acc, atol=1e-2, rtol=0)
-        torch.testing.assert_close(warp.object_acc.cpu(), cpu.object_acc, atol=0.2, rtol=0)
+        torch.testing.assert_close(warp.object_acc.cpu(), cpu.object_acc, atol=0.5, rtol=0)  # a light box (25 kg/m^3) chatters on the floor in float32

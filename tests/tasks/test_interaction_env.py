@@ -84,6 +84,7 @@ def test_warmup_holds_the_reference_clock(scene):
 def test_clip_end_truncates_with_success(scene):
     env = make_env(scene)
     env.cfg.init.stand_start_probability = 0.0
+    env.cfg.init.start_range = (0.0, 0.0)  # from the clip's start: reaching its end covers it (a success)
     env.psi.cfg.enabled = False
     env.reset()
     saw_success = False
