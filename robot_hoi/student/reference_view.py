@@ -50,11 +50,11 @@ class ReferenceView:
     """Duck-types the env for observation terms: state attributes come from `env`, references from `timeline`."""
 
     def __init__(self, env, timeline: ReferenceTimeline, keyframes, warmup_frames: int,
-                 teacher_obs: str = "full") -> None:
+                 teacher_obs: str | None = None) -> None:
         self._env = env
         self._timeline = timeline
         self.cfg = SimpleNamespace(keyframes=tuple(keyframes), warmup_frames=int(warmup_frames),
-                                   teacher_obs=teacher_obs)
+                                   teacher_obs=teacher_obs or env.cfg.teacher_obs)  # default: as the env's
 
     def __getattr__(self, name: str):
         return getattr(self._env, name)

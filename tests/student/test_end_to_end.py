@@ -25,7 +25,7 @@ def test_distil_export_check_and_dry_run(teacher_run, tmp_path, capsys):
     assert task["references"] == ["../references/synth_lift_place_seed0.npz"]
     assert (out / "references" / "synth_lift_place_seed0.npz").is_file()
     report = json.loads((out / "student" / "eval.json").read_text())
-    assert set(report) == {"teacher synthetic-box (MoCap)", "student (its reference)", "student (MoCap)"}
+    assert set(report) == {"teacher synthetic-tall_box (MoCap)", "student (its reference)", "student (MoCap)"}
 
     # resume continues the run and reuses the distilled reference
     assert main([*student_args(teacher_run, out), "--resume", "--set", "eval_episodes=0"]) == 0
