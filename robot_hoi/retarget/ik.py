@@ -383,6 +383,17 @@ class IKSolver:
         self._object = None
         return self.evaluate(qpos, targets, iters, object_track)
 
+    def refine_frames(self, qpos: np.ndarray, targets: np.ndarray, weights: np.ndarray, frames, iterations: int,
+                      object_track=None) -> np.ndarray:
+        """A copy of qpos (T, nq) with `frames` re-solved for `iterations` IK iterations, warm-started from their
+        current pose (with the object's push-out rows when `object_track` is given)."""
+        qpos = qpos.copy()
+        for t in frames:
+            self._object = None if object_track is None else self._object_at(object_track, int(t))
+            qpos[t] = self.solve_frame(qpos[t], targets[t], weights[t], iterations)[0]
+        self._object = None
+        return qpos
+
     @staticmethod
     def _object_at(track, t: int) -> tuple[HullPlanes, np.ndarray, np.ndarray]:
         hull, pos, quat_wxyz = track
