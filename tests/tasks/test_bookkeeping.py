@@ -180,6 +180,24 @@ def test_success_needs_the_clip_covered(scene):
     assert [e["success"].tolist() for e in episodes] == [[1.0, 1.0]]
 
 
+def test_interaction_success_needs_the_object_tracked(scene):
+    """A clip whose reference lifts the box 0.2 m at frame 5 while the robot (zero actions) leaves it on the floor
+    reaches the clip's end without a termination (object error 0.2 m < 0.5 m): InterMimic's success, but not an
+    interaction success (the object's error passed success_max_object_error). Unshifted, both are successes."""
+    env = make_env(scene, [standing_reference(scene, 20)])
+    episodes = finished_episodes(env, 19)
+    assert [e["success"].tolist() for e in episodes] == [[1.0, 1.0]]
+    assert episodes[0]["interaction_success"].tolist() == [1.0, 1.0]
+    assert (episodes[0]["E_o_max_cm"] < 1.0).all()
+
+    env.ref_object_pos[5:, 2] += 0.2  # the reference lifts the box; the simulated one stays where it was
+    env.reset()
+    episodes = finished_episodes(env, 19)
+    assert [e["success"].tolist() for e in episodes] == [[1.0, 1.0]]
+    assert episodes[0]["interaction_success"].tolist() == [0.0, 0.0]
+    assert episodes[0]["E_o_max_cm"].tolist() == pytest.approx([20.0, 20.0], abs=1.0)
+
+
 def test_duration_excludes_the_warmup(scene):
     """A stand start terminated on the first step after its warmup tracked one step: duration dt, not
     (warmup + 1) dt.

@@ -160,6 +160,7 @@ class InteractionEnv:
         self.prev_object_vel = z(n, 3)
         self.episode_sums: dict[str, Tensor] = {name: z(n) for name in self.reward_weights}
         self.episode_error_h, self.episode_error_o = z(n), z(n)
+        self.episode_max_error_h, self.episode_max_error_o = z(n), z(n)
         self.failure_counts = z(len(self.references), self.cfg.init.failure_segments)
         self.assisted = z(n)  # 1 where this episode gets the assist wrenches (drawn per episode)
 
@@ -325,6 +326,8 @@ class InteractionEnv:
         error_o = (self.object_points_world - self.ref_object_points_world).norm(dim=-1).mean(-1)
         self.episode_error_h += torch.where(tracking, error_h, 0.0)
         self.episode_error_o += torch.where(tracking, error_o, 0.0)
+        self.episode_max_error_h = torch.maximum(self.episode_max_error_h, torch.where(tracking, error_h, 0.0))
+        self.episode_max_error_o = torch.maximum(self.episode_max_error_o, torch.where(tracking, error_o, 0.0))
 
     def _episode_stats(self, done: Tensor, terminated: Tensor, reached_end: Tensor) -> dict[str, Tensor]:
         """Per finished episode: InterMimic's success, duration (s, after the warmup), E_h and E_o (cm, averaged
@@ -335,8 +338,14 @@ class InteractionEnv:
         clip_frames = (self.clip_end[clip] - self.clip_start[clip]).float()
         covered = (self.ref_index[done] - self.start_frame[done]).float() >= \
             self.cfg.success_min_frames_fraction * clip_frames
+        success = reached_end[done] & ~terminated[done] & covered
+        tracked = (self.episode_max_error_o[done] <= self.cfg.success_max_object_error) & \
+            (self.episode_max_error_h[done] <= self.cfg.success_max_link_error)
         return {
-            "success": (reached_end[done] & ~terminated[done] & covered).float(),
+            "success": success.float(),
+            "interaction_success": (success & tracked).float(),
+            "E_h_max_cm": 100 * self.episode_max_error_h[done],
+            "E_o_max_cm": 100 * self.episode_max_error_o[done],
             "duration_s": steps * self.dt,
             "E_h_cm": 100 * self.episode_error_h[done] / steps,
             "E_o_cm": 100 * self.episode_error_o[done] / steps,
@@ -351,7 +360,7 @@ class InteractionEnv:
         steps = self.episode_length[done].clamp(min=1).float()
         log = {f"Episode_Reward/{name}": (s[done] / steps).mean() for name, s in self.episode_sums.items()}
         log["Metrics/episode_length"] = steps.mean()
-        for key in ("success", "duration_s", "E_h_cm", "E_o_cm"):
+        for key in ("success", "interaction_success", "duration_s", "E_h_cm", "E_o_cm"):
             log[f"Metrics/{key}"] = stats[key].mean()
         log["Metrics/psi_buffer"] = float(len(self.psi))
         return log
@@ -414,6 +423,8 @@ class InteractionEnv:
             s[env_ids] = 0.0
         self.episode_error_h[env_ids] = 0.0
         self.episode_error_o[env_ids] = 0.0
+        self.episode_max_error_h[env_ids] = 0.0
+        self.episode_max_error_o[env_ids] = 0.0
         self._update_state(None if n == self.num_envs else env_ids)  # env_ids are distinct: n == all of them
         self.prev_link_vel[env_ids] = self.link_vel[env_ids]
         self.prev_object_vel[env_ids] = self.object_lin_vel[env_ids]
