@@ -6,9 +6,10 @@ project's own synthetic clip (license-free, generated on demand).
 
 from __future__ import annotations
 
+import copy
 import json
 import re
-from collections import defaultdict
+from collections import OrderedDict, defaultdict
 from dataclasses import asdict
 from pathlib import Path
 
@@ -74,16 +75,31 @@ def _safe(name: str) -> str:
     return re.sub(r"[^A-Za-z0-9_.-]+", "_", name)
 
 
+# Retargets made in this process, by content of (clip, embodiment): an IK retarget of a clip takes seconds, and
+# evaluation, student and test code build several envs of the same clip. Bounded; entries are deep-copied out.
+_RETARGETS: OrderedDict[str, object] = OrderedDict()
+_RETARGETS_KEPT = 8
+
+
 def load_or_retarget(clip, embodiment, cache: Path | None):
     """The clip's robot-space reference (RobotMotion), cached as npz next to the run."""
     from robot_hoi.retarget.motion import RobotMotion
     from robot_hoi.retarget.pipeline import retarget_clip
+    from robot_hoi.utils.fingerprint import fingerprint
 
     path = cache / f"{_safe(clip.name)}.npz" if cache is not None else None
     if path is not None and path.exists():
         return RobotMotion.load(path)
-    motion = retarget_clip(clip, embodiment).motion
-    motion.meta["feasibility"] = kinematic_report(motion, embodiment)
+    key = fingerprint((clip, embodiment))
+    if key in _RETARGETS:
+        _RETARGETS.move_to_end(key)
+        motion = copy.deepcopy(_RETARGETS[key])
+    else:
+        motion = retarget_clip(clip, embodiment).motion
+        motion.meta["feasibility"] = kinematic_report(motion, embodiment)
+        _RETARGETS[key] = copy.deepcopy(motion)
+        while len(_RETARGETS) > _RETARGETS_KEPT:
+            _RETARGETS.popitem(last=False)
     if path is not None:
         motion.save(path)
     return motion
@@ -116,7 +132,9 @@ def make_env(clips: list, env_cfg: InteractionEnvCfg, embodiment, cache: Path | 
     motions = motions or [load_or_retarget(c, embodiment, cache) for c in clips]
     references = [build_reference(c, m, env_cfg.reference_links) for c, m in zip(clips, motions, strict=True)]
     env = InteractionEnv(env_cfg, scene, references)
-    env.reference_feasibility = [m.meta.get("feasibility") or kinematic_report(m, embodiment) for m in motions]
+    # the retarget's feasibility figures where the retarget carries them (retargets made here and cached ones do);
+    # motions handed in without them are not re-analysed: that compiles another model per env
+    env.reference_feasibility = [m.meta.get("feasibility") for m in motions]
     return env
 
 
