@@ -50,6 +50,7 @@ LIFT_PLACE_DISTANCE = 0.42  # pelvis to box centre, m (human; the robot gets an 
 LIFT_PLACE_LEAN = np.radians(40.0)
 LIFT_PLACE_PELVIS_Z = 0.72
 LIFT_PLACE_RAISE = 0.30  # m the box goes up while held
+LIFT_PLACE_PALM_BELOW_TOP = 0.08  # palm centres below the box top (m)
 
 STAND_PELVIS_Z = 0.95
 WALK_PELVIS_Z = 0.91
@@ -204,7 +205,7 @@ def _lift_place_script(scene: Scene, gap_hold: float) -> Script:
     close = ramp(t, t_grip, t_lift) * (1 - ramp(t, t_placed, t_placed + 0.3))
     gap = PREGRASP_GAP * (1 - close) + gap_hold * close
     return Script(t, [], pelvis_x, pelvis_z, lean, squat, box_pos, grip, gap, "sides", TALL_BOX_SIZE_M,
-                  palm_height=TALL_BOX_SIZE_M[2] / 2 - 0.08)  # near the top: the robot's arms are short
+                  palm_height=TALL_BOX_SIZE_M[2] / 2 - LIFT_PLACE_PALM_BELOW_TOP)
 
 
 SCRIPTS = {"lift_carry": _lift_carry_script, "push": _push_script, "lift_place": _lift_place_script}

@@ -11,7 +11,8 @@ import numpy as np
 from robot_hoi.retarget.executable import ExecutableSettings, limit_speed, smooth_joints, squeeze_offsets
 from robot_hoi.retarget.hands import GraspRule, HandJoints, closure_profile, finger_angles, holding
 from robot_hoi.retarget.ik import IKResult, IKSettings, IKSolver
-from robot_hoi.retarget.kinematics import apply_joint_couplings, free_joint_id, joint_ids, resolve_links
+from robot_hoi.retarget.kinematics import (apply_joint_couplings, free_joint_id, joint_ids, link_positions,
+                                            resolve_links)
 from robot_hoi.retarget.landmarks import landmarks_for
 from robot_hoi.retarget.motion import RobotMotion, finite_difference_qvel
 from robot_hoi.retarget.object_contact import hand_probe_points
@@ -148,11 +149,7 @@ def _depenetrate(solver: IKSolver, result: IKResult, targets: RobotTargets, trac
         frames = np.flatnonzero(result.object_penetration > depth)
         if track is None or not len(frames):
             break
-        qpos = result.qpos.copy()
-        for t in frames:
-            solver._object = solver._object_at(track, int(t))
-            qpos[t] = solver.solve_frame(qpos[t], targets.pos[t], targets.weight[t], iterations)[0]
-        solver._object = None
+        qpos = solver.refine_frames(result.qpos, targets.pos, targets.weight, frames, iterations, track)
         result = solver.evaluate(qpos, targets.pos, result.iterations, track)
     return result
 
@@ -171,6 +168,21 @@ def _squeeze(model: mujoco.MjModel, cfg, qpos: np.ndarray, hold: dict[str, np.nd
     return squeeze_offsets(model, qpos, ramp, wrists, arms, options.executable)
 
 
+def robot_hand_lengths(model: mujoco.MjModel, link_map: dict[str, str]) -> dict[str, float]:
+    """{"L"/"R": mean distance from the wrist link to the mapped fingertip links} in the model's rest pose."""
+    data = mujoco.MjData(model)
+    mujoco.mj_kinematics(model, data)
+    lengths = {}
+    for side in ("L", "R"):
+        wrists = [r for r, h in link_map.items() if h == f"{side}_Wrist"]
+        tips = [r for r, h in link_map.items() if h.startswith(f"{side}_") and link_group(h) == "fingers"]
+        if len(wrists) == 1 and tips:
+            wrist = link_positions(data, resolve_links(model, wrists))[0]
+            tip_pos = link_positions(data, resolve_links(model, tips))
+            lengths[side] = float(np.linalg.norm(tip_pos - wrist, axis=-1).mean())
+    return lengths
+
+
 def retarget_clip(
     clip,
     cfg,
@@ -184,7 +196,8 @@ def retarget_clip(
         from robot_hoi.embodiment import build_model
 
         model = build_model(cfg)
-    targets = targets_from_clip(clip, cfg, scale=scale, mapping=options.mapping)
+    targets = targets_from_clip(clip, cfg, scale=scale, mapping=options.mapping,
+                                hand_length=robot_hand_lengths(model, cfg.link_map))
     out = retarget_targets(model, cfg, targets, options)
     out.motion.meta["clip"] = str(getattr(clip, "name", "") or getattr(clip, "source", ""))
     return out

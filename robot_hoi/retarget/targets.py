@@ -88,6 +88,11 @@ class TargetMapping:
     pin_height: float = 0.03  # m
     pin_speed: float = 0.25  # m/s
     pin_weight: float = 10.0
+    # The Inspire hand is ~1.65x a human hand (wrist to fingertip 0.25 m vs 0.15 m): mapping the human wrist and
+    # fingertips 1:1 puts the robot's fingertips on the human's and its wrist ~10 cm short, so a side grip lands
+    # on the box's top edge with the palm off the face. With hand_size_fit, each hand's links are scaled about the
+    # human palm (wrist-to-middle-knuckle midpoint) to the robot hand's size first, so the palms coincide.
+    hand_size_fit: bool = True
     group_weights: dict[str, float] = field(
         default_factory=lambda: {
             "pelvis": 3.0, "legs": 1.0, "feet": 2.0, "torso": 1.0, "head": 0.3,
@@ -274,10 +279,35 @@ def wxyz_to_xyzw(q: np.ndarray) -> np.ndarray:
     return np.concatenate([q[..., 1:4], q[..., 0:1]], axis=-1)
 
 
-def targets_from_clip(clip, cfg, scale: float | None = None, mapping: TargetMapping | None = None) -> RobotTargets:
+def fit_hand_size(body_pos: np.ndarray, human_pos: np.ndarray, human_names: list[str],
+                  hand_length: dict[str, float]) -> np.ndarray:
+    """human_pos (T, L, 3) with each hand's mapped links (wrist, fingertips) scaled about that hand's palm centre
+    (the wrist-to-middle-knuckle midpoint) by robot / human wrist-to-fingertip length (`hand_length[side]` over
+    the clip's mean distance from the wrist to the mapped fingertips)."""
+    from robot_hoi.data.layout import BODY_INDEX
+
+    out = human_pos.copy()
+    for side, length in hand_length.items():
+        links = [i for i, n in enumerate(human_names) if n.startswith(f"{side}_") and link_group(n) in
+                 ("wrists", "fingers")]
+        tips = [i for i in links if link_group(human_names[i]) == "fingers"]
+        if not tips or f"{side}_Wrist" not in BODY_INDEX:
+            continue
+        wrist = body_pos[:, BODY_INDEX[f"{side}_Wrist"]]
+        human_length = float(np.linalg.norm(human_pos[:, tips] - wrist[:, None], axis=-1).mean())
+        if human_length <= 1e-6:
+            continue
+        palm = 0.5 * (wrist + body_pos[:, BODY_INDEX[f"{side}_Middle1"]])
+        out[:, links] = palm[:, None] + (length / human_length) * (human_pos[:, links] - palm[:, None])
+    return out
+
+
+def targets_from_clip(clip, cfg, scale: float | None = None, mapping: TargetMapping | None = None,
+                      hand_length: dict[str, float] | None = None) -> RobotTargets:
     """Robot targets for every `cfg.link_map` entry of an HOIClip (robot_hoi.data).
 
-    `cfg` needs `robot_height` (m) and `link_map` {robot body/site: human body name}.
+    `cfg` needs `robot_height` (m) and `link_map` {robot body/site: human body name}. `hand_length`: the robot's
+    mean wrist-to-fingertip distance per side ("L", "R"), for `mapping.hand_size_fit` (off where not given).
     """
     from robot_hoi.data.layout import BODY_INDEX
 
@@ -308,6 +338,8 @@ def targets_from_clip(clip, cfg, scale: float | None = None, mapping: TargetMapp
     labels = getattr(clip, "body_contact", None)
     labels = None if labels is None else np.asarray(labels)[:, human_idx]
     human_pos = body_pos[:, human_idx]
+    if mapping.hand_size_fit and hand_length:
+        human_pos = fit_hand_size(body_pos, human_pos, list(link_map.values()), hand_length)
 
     pos, a, obj_robot, dist = map_positions(
         human_pos, body_pos[:, 0, :2], obj_pos, obj_quat_xyzw, points_local, scale, mapping, labels, local_distance,

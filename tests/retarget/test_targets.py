@@ -12,6 +12,7 @@ from robot_hoi.errors import DataError
 from robot_hoi.retarget.targets import (
     TargetMapping,
     anchor_weights,
+    fit_hand_size,
     link_group,
     map_positions,
     surface_distance,
@@ -145,3 +146,20 @@ def test_targets_from_clip_rejects_bad_inputs():
         targets_from_clip(clip, cfg)
     with pytest.raises(DataError, match="anchor_mode"):
         TargetMapping(anchor_mode="nearest")
+
+
+def test_hand_size_fit_scales_each_hand_about_its_palm():
+    """The robot hand twice the human's: wrist and fingertip targets move away from the palm centre (wrist to middle
+    knuckle midpoint) by 2x; the palm centre, other links and the other hand's links (no length given) stay."""
+    from robot_hoi.data.layout import BODY_INDEX, BODY_NAMES
+
+    body = np.random.default_rng(0).normal(size=(2, len(BODY_NAMES), 3))
+    names = ["Pelvis", "L_Wrist", "L_Index3", "L_Thumb3", "R_Wrist", "R_Index3"]
+    human = body[:, [BODY_INDEX[n] for n in names]]
+    wrist, knuckle = body[:, BODY_INDEX["L_Wrist"]], body[:, BODY_INDEX["L_Middle1"]]
+    tips = human[:, 2:4]
+    length = 2.0 * float(np.linalg.norm(tips - wrist[:, None], axis=-1).mean())
+    out = fit_hand_size(body, human, names, {"L": length})
+    palm = 0.5 * (wrist + knuckle)
+    np.testing.assert_allclose(out[:, 1:4], palm[:, None] + 2.0 * (human[:, 1:4] - palm[:, None]))
+    np.testing.assert_array_equal(out[:, [0, 4, 5]], human[:, [0, 4, 5]])
