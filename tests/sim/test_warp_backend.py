@@ -91,14 +91,20 @@ def test_set_state_recomputes_sensors_of_reset_worlds_only(scene):
 STAND_STARTS = "init.stand_start_probability=1.0"
 
 
-def test_interaction_env_runs_unchanged_on_warp():
-    """Same env code, same seed, same actions: observations, rewards and terminations agree."""
+def _env_pair() -> dict:
+    """{"cpu": env, "warp": env}: the default task on each backend, same seed, stand starts."""
     embodiment, clip = load_embodiment("g1_inspire"), default_clip()
     envs = {}
     for backend in ("cpu", "warp"):
         cfg = load_yaml_dataclass(InteractionEnvCfg, TASK_CONFIG, [f"backend={backend}", f"num_envs={NUM_ENVS}",
                                                                    STAND_STARTS])
         envs[backend] = factory.make_env([clip], cfg, embodiment)
+    return envs
+
+
+def test_interaction_env_runs_unchanged_on_warp():
+    """Same env code, same seed, same actions: observations, rewards and terminations agree."""
+    envs = _env_pair()
     on_cpu = lambda *values: [v.cpu() for v in values]  # noqa: E731
     obs = {name: env.reset() for name, env in envs.items()}
     torch.testing.assert_close(*on_cpu(obs["warp"]["policy"], obs["cpu"]["policy"]), atol=1e-4, rtol=0)
@@ -146,7 +152,10 @@ def test_train_cli_runs_a_teacher_on_the_warp_backend(tmp_path):
 
     out = tmp_path / "run"
     code = main(["train", "--backend", "warp", "--budget", "2it", "--out", str(out), "--set", "env.num_envs=4",
-                 "--set", "runner.tensorboard=false", "--eval-episodes", "1"])
+                 "--set", "ppo.horizon=8", "--set", "runner.tensorboard=false", "--eval-episodes", "1",
+                 # episodes end on their first step: the evaluation (until an episode ends) takes one warp step, not
+                 # the ~80 of a fresh policy (warp's CPU device launches each kernel from Python: ~0.9 s a step)
+                 "--set", "env.warmup_frames=0", "--set", "env.terminations.max_mean_link_error=0.001"])
     assert code == 0
     group = next(p for p in out.iterdir() if p.is_dir())
     assert (group / "model_2.pt").exists() and (group / "eval.json").exists()
@@ -169,14 +178,10 @@ def test_sim_device_picks_the_warp_device_and_refuses_unknown_ones():
 def test_finite_difference_accelerations_match_the_cpu_backend():
     """link_acc / object_acc difference velocities across steps: on warp the velocities are views of the live
     physics memory, so a kept previous value that is not a copy would make them exactly zero."""
-    embodiment, clip = load_embodiment("g1_inspire"), default_clip()
-    envs = {}
-    for backend in ("cpu", "warp"):
-        cfg = load_yaml_dataclass(InteractionEnvCfg, TASK_CONFIG, [f"backend={backend}", f"num_envs={NUM_ENVS}",
-                                                                   STAND_STARTS])
-        envs[backend] = factory.make_env([clip], cfg, embodiment)
-        envs[backend].reset()
+    envs = _env_pair()
     cpu, warp = envs["cpu"], envs["warp"]
+    cpu.reset()
+    warp.reset()
     generator = torch.Generator().manual_seed(1)
     for _ in range(4):
         actions = 0.2 * torch.randn(NUM_ENVS, cpu.num_actions, generator=generator)
