@@ -19,9 +19,9 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from deploy.operator import OperatorInput
+from deploy.safety import Phase
 from robot_hoi import termination
 from robot_hoi.termination import Thresholds
-from deploy.safety import Phase
 from sim2sim import metrics
 from sim2sim.world import SimWorld
 

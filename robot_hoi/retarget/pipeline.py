@@ -11,8 +11,13 @@ import numpy as np
 from robot_hoi.retarget.executable import ExecutableSettings, limit_speed, smooth_joints, squeeze_offsets
 from robot_hoi.retarget.hands import GraspRule, HandJoints, closure_profile, finger_angles, holding
 from robot_hoi.retarget.ik import IKResult, IKSettings, IKSolver
-from robot_hoi.retarget.kinematics import (apply_joint_couplings, free_joint_id, joint_ids, link_positions,
-                                            resolve_links)
+from robot_hoi.retarget.kinematics import (
+    apply_joint_couplings,
+    free_joint_id,
+    joint_ids,
+    link_positions,
+    resolve_links,
+)
 from robot_hoi.retarget.landmarks import landmarks_for
 from robot_hoi.retarget.motion import RobotMotion, finite_difference_qvel
 from robot_hoi.retarget.object_contact import hand_probe_points

@@ -7,9 +7,9 @@ import numpy as np
 import torch
 
 from robot_hoi.embodiment.collision import world_bits
-from robot_hoi.termination import hand_link_groups
 from robot_hoi.sim import make_backend
 from robot_hoi.sim.scene import OBJECT_BODY, OBJECT_JOINT, SceneLayout, add_object, add_sensors
+from robot_hoi.termination import hand_link_groups
 
 HAND_LINK_MARKERS = ("_tip", "hand_base")
 

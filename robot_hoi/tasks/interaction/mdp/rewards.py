@@ -20,7 +20,6 @@ from torch import Tensor
 from robot_hoi.utils.torch_rot import quat_diff_angle
 
 
-
 def _error(x: Tensor, squared: bool) -> Tensor:
     return x.square() if squared else x
 
