@@ -51,6 +51,8 @@ LIFT_PLACE_LEAN = np.radians(40.0)
 LIFT_PLACE_PELVIS_Z = 0.72
 LIFT_PLACE_RAISE = 0.30  # m the box goes up while held
 LIFT_PLACE_PALM_BELOW_TOP = 0.08  # palm centres below the box top (m)
+LIFT_PLACE_PALM_FORWARD = -0.03  # palm centres ahead of the box centre (m)
+LIFT_PLACE_TURN_LEAD = 1.0  # hands turn to the grip this many times faster than they close in
 
 STAND_PELVIS_Z = 0.95
 WALK_PELVIS_Z = 0.91
@@ -106,6 +108,8 @@ class Script:
     hold_style: str  # "sides" (lift) or "top" (push)
     box_size: tuple[float, float, float] = BOX_SIZE_M
     palm_height: float = 0.08  # palm centres above the box centre in a side hold (m)
+    palm_forward: float = -0.03  # palm centres ahead of the box centre in a side hold (m)
+    turn_lead: float = 1.0  # the hands turn to their grip orientation this many times faster than they move in
 
 
 def _depth(pelvis_z: np.ndarray, lowest: float) -> np.ndarray:
@@ -205,7 +209,8 @@ def _lift_place_script(scene: Scene, gap_hold: float) -> Script:
     close = ramp(t, t_grip, t_lift) * (1 - ramp(t, t_placed, t_placed + 0.3))
     gap = PREGRASP_GAP * (1 - close) + gap_hold * close
     return Script(t, [], pelvis_x, pelvis_z, lean, squat, box_pos, grip, gap, "sides", TALL_BOX_SIZE_M,
-                  palm_height=TALL_BOX_SIZE_M[2] / 2 - LIFT_PLACE_PALM_BELOW_TOP)
+                  palm_height=TALL_BOX_SIZE_M[2] / 2 - LIFT_PLACE_PALM_BELOW_TOP,
+                  palm_forward=LIFT_PLACE_PALM_FORWARD, turn_lead=LIFT_PLACE_TURN_LEAD)
 
 
 SCRIPTS = {"lift_carry": _lift_carry_script, "push": _push_script, "lift_place": _lift_place_script}
@@ -217,7 +222,7 @@ def _box_hand_targets(script: Script, side: str):
     sign = 1.0 if side == "L" else -1.0
     num_frames = len(script.t)
     if script.hold_style == "sides":  # palms on the upper side faces, fingers forward and 45 deg down
-        point = np.array([-0.03, sign * half[1], script.palm_height])
+        point = np.array([script.palm_forward, sign * half[1], script.palm_height])
         outward = approach = np.array([0.0, sign, 0.0])
         fingers = np.array([1.0, 0.0, -1.0]) / np.sqrt(2.0)
     else:  # palms on the top face near the back edge, fingers forward; come in from above and behind
@@ -262,7 +267,8 @@ def _pose(script: Script, offsets: np.ndarray) -> tuple[np.ndarray, np.ndarray, 
         box_hand = hand_rotation(side, fingers, normal)
         box_wrist = palm - box_hand.apply(L_PALM_CENTRE if side == "L" else R_PALM_CENTRE)
         w = script.grip[:, None]
-        hand = free_hand * Rotation.from_rotvec(w * (free_hand.inv() * box_hand).as_rotvec())
+        turn = np.clip(script.turn_lead * w, 0.0, 1.0)
+        hand = free_hand * Rotation.from_rotvec(turn * (free_hand.inv() * box_hand).as_rotvec())
         pole_free = np.array([-1.0, sign * 0.3, 0.0])
         pole_box = (
             np.array([-0.4, sign * 0.5, -1.0])
