@@ -174,13 +174,14 @@ def _squeeze(model: mujoco.MjModel, cfg, qpos: np.ndarray, hold: dict[str, np.nd
 
 
 def robot_hand_lengths(model: mujoco.MjModel, link_map: dict[str, str]) -> dict[str, float]:
-    """{"L"/"R": mean distance from the wrist link to the mapped fingertip links} in the model's rest pose."""
+    """{"left"/"right": mean distance from the wrist link to the mapped fingertip links} in the model's rest pose."""
     data = mujoco.MjData(model)
     mujoco.mj_kinematics(model, data)
     lengths = {}
-    for side in ("L", "R"):
-        wrists = [r for r, h in link_map.items() if h == f"{side}_Wrist"]
-        tips = [r for r, h in link_map.items() if h.startswith(f"{side}_") and link_group(h) == "fingers"]
+    for side in ("left", "right"):
+        hand = [(robot, human) for robot, human in link_map.items() if hand_side(human) == side]
+        wrists = [robot for robot, human in hand if link_group(human) == "wrists"]
+        tips = [robot for robot, human in hand if link_group(human) == "fingers"]
         if len(wrists) == 1 and tips:
             wrist = link_positions(data, resolve_links(model, wrists))[0]
             tip_pos = link_positions(data, resolve_links(model, tips))

@@ -282,22 +282,22 @@ def wxyz_to_xyzw(q: np.ndarray) -> np.ndarray:
 def fit_hand_size(body_pos: np.ndarray, human_pos: np.ndarray, human_names: list[str],
                   hand_length: dict[str, float]) -> np.ndarray:
     """human_pos (T, L, 3) with each hand's mapped links (wrist, fingertips) scaled about that hand's palm centre
-    (the wrist-to-middle-knuckle midpoint) by robot / human wrist-to-fingertip length (`hand_length[side]` over
-    the clip's mean distance from the wrist to the mapped fingertips)."""
+    (the wrist-to-middle-knuckle midpoint) by robot / human wrist-to-fingertip length (`hand_length[side]`, side
+    as `hand_side` names it, over the clip's mean distance from the wrist to the mapped fingertips)."""
     from robot_hoi.data.layout import BODY_INDEX
 
     out = human_pos.copy()
     for side, length in hand_length.items():
-        links = [i for i, n in enumerate(human_names) if n.startswith(f"{side}_") and link_group(n) in
-                 ("wrists", "fingers")]
+        links = [i for i, n in enumerate(human_names) if hand_side(n) == side]
+        wrists = [human_names[i] for i in links if link_group(human_names[i]) == "wrists"]
         tips = [i for i in links if link_group(human_names[i]) == "fingers"]
-        if not tips or f"{side}_Wrist" not in BODY_INDEX:
+        if len(wrists) != 1 or not tips:
             continue
-        wrist = body_pos[:, BODY_INDEX[f"{side}_Wrist"]]
+        wrist = body_pos[:, BODY_INDEX[wrists[0]]]
         human_length = float(np.linalg.norm(human_pos[:, tips] - wrist[:, None], axis=-1).mean())
         if human_length <= 1e-6:
             continue
-        palm = 0.5 * (wrist + body_pos[:, BODY_INDEX[f"{side}_Middle1"]])
+        palm = 0.5 * (wrist + body_pos[:, BODY_INDEX[wrists[0].replace("Wrist", "Middle1")]])
         out[:, links] = palm[:, None] + (length / human_length) * (human_pos[:, links] - palm[:, None])
     return out
 
@@ -307,7 +307,7 @@ def targets_from_clip(clip, cfg, scale: float | None = None, mapping: TargetMapp
     """Robot targets for every `cfg.link_map` entry of an HOIClip (robot_hoi.data).
 
     `cfg` needs `robot_height` (m) and `link_map` {robot body/site: human body name}. `hand_length`: the robot's
-    mean wrist-to-fingertip distance per side ("L", "R"), for `mapping.hand_size_fit` (off where not given).
+    mean wrist-to-fingertip distance per side ("left", "right"), for `mapping.hand_size_fit` (off where not given).
     """
     from robot_hoi.data.layout import BODY_INDEX
 

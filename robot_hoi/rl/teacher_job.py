@@ -240,7 +240,8 @@ def format_line(summary: dict[str, Any]) -> str:
     ev = summary["eval"]
     resumed = "" if summary["resumed_from"] is None else f" (resumed at {summary['resumed_from']})"
     return (f"{summary['group']}: it {summary['iteration']}{resumed}, return {_number(summary['mean_return'])}, "
-            f"success {ev['success_rate']:.2f} (interaction {ev.get('interaction_success_rate', float('nan')):.2f}), E_h {ev['E_h_cm']:.1f} cm, E_o {ev['E_o_cm']:.1f} cm, "
+            f"success {ev['success_rate']:.2f} (interaction {ev.get('interaction_success_rate', float('nan')):.2f}), "
+            f"E_h {ev['E_h_cm']:.1f} cm, E_o {ev['E_o_cm']:.1f} cm, "
             f"{summary['wall_s']:.0f} s on {summary['host']}")
 
 

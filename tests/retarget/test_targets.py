@@ -159,7 +159,7 @@ def test_hand_size_fit_scales_each_hand_about_its_palm():
     wrist, knuckle = body[:, BODY_INDEX["L_Wrist"]], body[:, BODY_INDEX["L_Middle1"]]
     tips = human[:, 2:4]
     length = 2.0 * float(np.linalg.norm(tips - wrist[:, None], axis=-1).mean())
-    out = fit_hand_size(body, human, names, {"L": length})
+    out = fit_hand_size(body, human, names, {"left": length})
     palm = 0.5 * (wrist + knuckle)
     np.testing.assert_allclose(out[:, 1:4], palm[:, None] + 2.0 * (human[:, 1:4] - palm[:, None]))
     np.testing.assert_array_equal(out[:, [0, 4, 5]], human[:, [0, 4, 5]])
