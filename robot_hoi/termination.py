@@ -75,5 +75,12 @@ def reasons(th: Thresholds, link_error, root_height, object_error, interaction_e
     }
 
 
+def interaction_tracked(worst_object_error, worst_body_error, max_object_error: float, max_body_error: float):
+    """The half of `interaction_success` that a plain success lacks: over the tracked steps (after the warmup) the
+    worst mean object point error and the worst mean body-link error (hands excluded, as E_h) stayed within their
+    bounds (m). Without it a policy that never lifts the object can still reach the clip's end."""
+    return (worst_object_error <= max_object_error) & (worst_body_error <= max_body_error)
+
+
 def _amax_last(x):
     return x.amax(-1) if hasattr(x, "amax") else x.max(-1)  # torch's max(-1) returns (values, indices)

@@ -85,6 +85,7 @@ def handler(args: argparse.Namespace) -> int:
     )
     report, paths = evaluate(options)
     main = report["policies"][0]["label"]
+    from sim2sim.summary import SUCCESS_KEYS
     from sim2sim.verdict import verdict_lines
 
     for line in verdict_lines(report["verdict"]) if report.get("verdict") else []:
@@ -94,9 +95,9 @@ def handler(args: argparse.Namespace) -> int:
     for cell in report["cells"]:
         if cell["policy"] != main:
             continue
-        success = "-" if cell["success_rate"] is None else f"{cell['success_rate']:.2f}"
+        success, interaction = (("-" if cell.get(k) is None else f"{cell[k]:.2f}") for k in SUCCESS_KEYS)
         e_h = cell["E_h_cm"]["mean"]
-        print(f"  {cell['clip']:<28} {cell['perturbation']:<24} success {success}  "
+        print(f"  {cell['clip']:<28} {cell['perturbation']:<24} success {success} (interaction {interaction})  "
               f"E_h {'-' if e_h is None else f'{e_h:.1f} cm'}")
     t = report["timing"]
     print(f"  {t['simulated_s']:.1f} simulated s in {t['wall_s']:.1f} s on {t['workers']} process(es): an episode ran "

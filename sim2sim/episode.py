@@ -20,6 +20,7 @@ from deploy.policy import OnnxPolicy
 from deploy.rotations import quat_wxyz_from_axis_angle, yaw_of_quat_wxyz
 from deploy.runlog import EventLog, TickRecorder
 from deploy.safety import Phase, SafetyConfig
+from robot_hoi import termination
 from sim2sim import metrics
 from sim2sim.clock import SimClock
 from sim2sim.hands import SimulatedInspireHands
@@ -52,6 +53,9 @@ class EpisodeJob:
     tracker_rate_hz: float = 120.0
     hand_rate_hz: float = 100.0
     max_frames: int | None = None  # evaluate only the first frames of the clip
+    # (object m, body m): interaction success = success within these worst errors (the task config's
+    # success_max_object_error / success_max_link_error); None: not judged
+    success_bounds: tuple[float, float] | None = None
     keep_traces: bool = True
 
 
@@ -183,8 +187,13 @@ def _result(job, contract, world, clock, monitor, recorder, summary, run_time, w
     link_names = list(contract.link_names)
     body_links = metrics.body_link_indices(link_names)
     root = link_names.index("pelvis") if "pelvis" in link_names else body_links[0]
+    tracked = np.asarray(monitor.ticks, dtype=int) > contract.warmup_frames  # training's E_h/E_o skip the warmup
     tracking = metrics.tracking_metrics(link_pos, motion.link_pos[frames], np.asarray(monitor.object_error),
-                                        body_links, root)
+                                        body_links, root, tracked)
+    interaction_success = None
+    if job.success_bounds is not None:
+        interaction_success = bool(success and termination.interaction_tracked(
+            tracking["E_o_max_cm"] / 100, tracking["E_h_max_cm"] / 100, *job.success_bounds))
     rows = recorder.rows
     policy_rows = [r for r in rows if int(r["phase"]) == Phase.POLICY]
     def stack(key: str) -> np.ndarray:  # (policy ticks, 12); empty when the policy never ran
@@ -201,6 +210,7 @@ def _result(job, contract, world, clock, monitor, recorder, summary, run_time, w
         "episode": job.episode,
         "seed": job.seed,
         "success": success,
+        "interaction_success": interaction_success,
         "outcome": outcome,
         "terminations": list(monitor.terminations),
         "duration_s": float(len(monitor.ticks) / motion.fps),

@@ -149,6 +149,7 @@ def evaluate(o: Sim2SimOptions) -> tuple[dict, dict[str, Path]]:
                          policy_targets(entry.contract, o.motion, o.embodiment, o.self_collision, o.clip_options))
     terminations = task_config().terminations
     thresholds = Thresholds(**{k: getattr(terminations, k) for k in Thresholds.__dataclass_fields__})
+    success_bounds = (task_config().success_max_object_error, task_config().success_max_link_error)
 
     jobs = []
     for entry in entries:
@@ -159,7 +160,7 @@ def evaluate(o: Sim2SimOptions) -> tuple[dict, dict[str, Path]]:
                     jobs.append(EpisodeJob(entry.path, entry.label, target, perturbation, ep, _seed(o.seed, pi, ep),
                                            thresholds=thresholds, hand_transport=o.hand_transport,
                                            hand_link=hand_link, tracker_rate_hz=o.tracker_rate_hz,
-                                           max_frames=max_frames))
+                                           max_frames=max_frames, success_bounds=success_bounds))
     workers = o.workers or default_workers()
     say(f"sim2sim: {len(jobs)} episode(s) on {min(workers, len(jobs))} worker process(es) -> {out}")
     counter = {"done": 0}

@@ -104,15 +104,23 @@ def velocity_error(pos: np.ndarray, ref: np.ndarray) -> float:
 
 
 def tracking_metrics(link_pos: np.ndarray, ref_link_pos: np.ndarray, object_err_m: np.ndarray,
-                     body_links: list[int], root: int) -> dict[str, float]:
-    """All tracking errors of one episode from its evaluated frames (T, L, 3) and per-frame object error (T,)."""
+                     body_links: list[int], root: int, tracked: np.ndarray | None = None) -> dict[str, float]:
+    """All tracking errors of one episode from its evaluated frames (T, L, 3) and per-frame object error (T,).
+    E_h_max_cm / E_o_max_cm: the worst per-frame errors over the `tracked` frames (bool (T,); all when None), as
+    training's interaction success reads them (after the warmup)."""
+    nan = float("nan")
     if len(link_pos) == 0:
-        nan = float("nan")
-        return {"E_h_cm": nan, "E_o_cm": nan, "mpjpe_g_mm": nan, "mpjpe_mm": nan, "e_acc_mm": nan, "e_vel_mm": nan}
+        return {"E_h_cm": nan, "E_o_cm": nan, "E_h_max_cm": nan, "E_o_max_cm": nan, "mpjpe_g_mm": nan,
+                "mpjpe_mm": nan, "e_acc_mm": nan, "e_vel_mm": nan}
     pos, ref = link_pos[:, body_links], ref_link_pos[:, body_links]
     root_in_body = body_links.index(root)
+    tracked = np.ones(len(pos), dtype=bool) if tracked is None else np.asarray(tracked, dtype=bool)
+    body_err = mean_position_error(pos, ref)
+    object_err = np.asarray(object_err_m, dtype=np.float64)
     return {
-        "E_h_cm": 100.0 * float(mean_position_error(pos, ref).mean()),
+        "E_h_max_cm": 100.0 * float(body_err[tracked].max()) if tracked.any() else nan,
+        "E_o_max_cm": 100.0 * float(object_err[tracked].max()) if tracked.any() else nan,
+        "E_h_cm": 100.0 * float(body_err.mean()),
         "E_o_cm": 100.0 * float(np.mean(object_err_m)),
         "mpjpe_g_mm": 1000.0 * mpjpe_global(pos, ref),
         "mpjpe_mm": 1000.0 * mpjpe_root_relative(pos, ref, root_in_body),

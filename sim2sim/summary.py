@@ -11,6 +11,7 @@ HAND_KEYS = ("mean_command", "command_step", "closed_fraction", "open_fraction",
              "peak_force_g", "mean_force_g")
 METRIC_LABELS = {
     "success_rate": "success",
+    "interaction_success_rate": "interaction success",
     "duration_s": "duration (s)",
     "E_h_cm": "E_h (cm)",
     "E_o_cm": "E_o (cm)",
@@ -25,6 +26,10 @@ METRIC_LABELS = {
 METRIC_DEFINITIONS = {
     "success_rate": "share of episodes that reached the clip's end without an InterMimic early termination or a "
                     "runtime fault",
+    "interaction_success_rate": "share of episodes that succeeded and also kept the object (mean surface-point "
+                                "error) and the body (mean link error) within the task config's "
+                                "success_max_object_error / success_max_link_error at every tracked frame: a "
+                                "policy that never lifts the object can succeed, not interaction-succeed",
     "duration_s": "seconds of the clip tracked before the episode ended",
     "E_h_cm": "mean distance between the robot's body links and the reference's, hands excluded",
     "E_o_cm": "mean distance between the object's surface points and the reference object's; small also when the "
@@ -36,7 +41,10 @@ METRIC_DEFINITIONS = {
 }
 
 
-def definitions_note(keys=("success_rate", *METRIC_KEYS)) -> str:
+SUCCESS_KEYS = ("success_rate", "interaction_success_rate")
+
+
+def definitions_note(keys=(*SUCCESS_KEYS, *METRIC_KEYS)) -> str:
     return "; ".join(f"{METRIC_LABELS[k]}: {METRIC_DEFINITIONS[k]}" for k in keys)
 
 
@@ -62,6 +70,7 @@ def _cell(key: tuple[str, str, str], episodes: list[dict]) -> dict:
         "episodes": len(episodes),
         "errors": [e["error"] for e in episodes if "error" in e],
         "success_rate": (sum(bool(e["success"]) for e in ok) / len(ok)) if ok else None,
+        "interaction_success_rate": _interaction_rate(ok),
         "outcomes": dict(Counter(e["outcome"] for e in ok)),
         "touched_episodes": sum(bool(e.get("object_touched")) for e in ok),
         "fell_episodes": sum(bool(e.get("fell")) for e in ok),
@@ -93,9 +102,14 @@ def _cell(key: tuple[str, str, str], episodes: list[dict]) -> dict:
     return cell
 
 
+def _interaction_rate(episodes: list[dict]) -> float | None:
+    judged = [e["interaction_success"] for e in episodes if e.get("interaction_success") is not None]
+    return sum(judged) / len(judged) if judged else None
+
+
 def cell_value(cell: dict, key: str) -> float | None:
-    """success_rate as is, every other metric by its mean."""
-    if key == "success_rate":
-        return cell.get("success_rate")
+    """The success rates as they are, every other metric by its mean."""
+    if key in SUCCESS_KEYS:
+        return cell.get(key)
     value = cell.get(key)
     return value.get("mean") if isinstance(value, dict) else value

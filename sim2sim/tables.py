@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from sim2sim.summary import METRIC_KEYS, METRIC_LABELS, cell_value, definitions_note
+from sim2sim.summary import METRIC_KEYS, METRIC_LABELS, SUCCESS_KEYS, cell_value, definitions_note
 
 
 @dataclass
@@ -88,11 +88,11 @@ def result_tables(report: dict) -> list[Table]:
     who = " / ".join(labels)
     tables = []
     for clip in clips:
-        headers = ["perturbation"] + [METRIC_LABELS[k] for k in ("success_rate", *METRIC_KEYS)] + ["episodes"]
+        headers = ["perturbation"] + [METRIC_LABELS[k] for k in (*SUCCESS_KEYS, *METRIC_KEYS)] + ["episodes"]
         rows = []
         for p in perturbations:
             row = [perturbation_label(report, p)]
-            for key in ("success_rate", *METRIC_KEYS):
+            for key in (*SUCCESS_KEYS, *METRIC_KEYS):
                 getter = _e_o if key == "E_o_cm" else (lambda c, k=key: cell_value(c, k))
                 row.append(_joined(cells, labels, clip, p, getter))
             row.append(_joined(cells, labels, clip, p, lambda c: c["episodes"]))

@@ -35,6 +35,11 @@ def verdict(report: dict, thresholds: ReadyThresholds = ReadyThresholds()) -> di
         checks.append((success is not None and success >= thresholds.min_success,
                        f"{clip}: success {_f(success)} (needs >= {thresholds.min_success:g}, "
                        f"{FLAGS['min_success']})"))
+        interaction = cell_value(cell, "interaction_success_rate")
+        if interaction is not None:  # reaching the end without carrying the object is not ready
+            checks.append((interaction >= thresholds.min_success,
+                           f"{clip}: interaction success {_f(interaction)} (needs >= {thresholds.min_success:g}, "
+                           f"{FLAGS['min_success']})"))
         checks.append((e_h is not None and e_h <= thresholds.max_e_h_cm,
                        f"{clip}: E_h {_f(e_h, 1)} cm (needs <= {thresholds.max_e_h_cm:g} cm, {FLAGS['max_e_h_cm']})"))
         faults = cell.get("runtime", {}).get("episodes_with_faults", 0) + len(cell.get("errors", []))

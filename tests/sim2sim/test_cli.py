@@ -22,11 +22,15 @@ def test_report_for_the_embedded_clip(e2e_report, exported_policy):
     for cell in data["cells"]:
         assert cell["episodes"] == 1 and cell["errors"] == []
         assert 0.0 <= cell["success_rate"] <= 1.0
+        assert 0.0 <= cell["interaction_success_rate"] <= cell["success_rate"]
         for key in METRICS:
             assert cell[key]["n"] == 1 and math.isfinite(cell[key]["mean"]), (cell["perturbation"], key)
         assert cell["hand_bus"]["cycles"] > 0
         assert cell["timing"]["policy_tick_wall_ms_p50"]["mean"] > 0
     episodes = data["episodes"]
+    for e in episodes:  # judged on the worst tracked frame, as in training
+        assert isinstance(e["interaction_success"], bool) and e["E_o_max_cm"] >= e["E_o_cm"] > 0
+        assert e["interaction_success"] <= e["success"]
     assert len(episodes) == len(SUITES["default"]) and all("trace" not in e for e in episodes)
     assert data["timing"]["simulated_s"] > 0 and data["timing"]["realtime_factor_per_core"] > 0
 

@@ -52,6 +52,7 @@ def test_tracking_metrics_units_and_hand_links_excluded():
     assert out["mpjpe_mm"] == pytest.approx(10.0)
     assert out["e_vel_mm"] == pytest.approx(0.0)
     assert out["e_acc_mm"] == pytest.approx(0.0)
+    assert out["E_h_max_cm"] == pytest.approx(1.0) and out["E_o_max_cm"] == pytest.approx(3.0)
     empty = metrics.tracking_metrics(np.zeros((0, 3, 3)), np.zeros((0, 3, 3)), np.zeros(0), body, root=0)
     assert all(math.isnan(v) for v in empty.values())
 
@@ -118,3 +119,19 @@ def test_same_conventions_as_training():
     points = np.random.default_rng(0).normal(size=(340, 3))
     np.testing.assert_allclose(metrics.subsample_points(points, 256),
                                _subsample(torch.as_tensor(points), 256).numpy())
+
+
+def test_worst_errors_skip_untracked_frames():
+    """interaction success reads the worst frame after the warmup, as training does: a bad warmup frame is not it."""
+    body = [0, 1]
+    ref = np.zeros((4, 2, 3))
+    pos = ref.copy()
+    pos[0, :, 0] = 0.40  # warmup frame far off
+    pos[2, :, 0] = 0.05
+    obj = np.array([0.30, 0.01, 0.02, 0.04])
+    tracked = np.array([False, True, True, True])
+    out = metrics.tracking_metrics(pos, ref, obj, body, root=0, tracked=tracked)
+    assert out["E_h_max_cm"] == pytest.approx(5.0) and out["E_o_max_cm"] == pytest.approx(4.0)
+    assert metrics.tracking_metrics(pos, ref, obj, body, root=0)["E_h_max_cm"] == pytest.approx(40.0)
+    none = metrics.tracking_metrics(pos, ref, obj, body, root=0, tracked=np.zeros(4, dtype=bool))
+    assert math.isnan(none["E_h_max_cm"]) and math.isnan(none["E_o_max_cm"])

@@ -44,6 +44,18 @@ def test_ready_when_every_threshold_holds():
     assert v["ready"] and verdict_lines(v)[0].startswith("READY")
 
 
+def test_reaching_the_end_without_the_object_is_not_ready():
+    cell = _cell("nominal", 1.0)
+    cell["interaction_success_rate"] = 0.25
+    v = verdict(_report([cell]))
+    lines = verdict_lines(v)
+    assert not v["ready"]
+    assert any("interaction success 0.25 (needs >= 0.8" in line for line in lines)
+    table = result_tables(_report([cell]))[0]
+    assert table.rows[0][table.headers.index("interaction success")] == "0.25"
+    assert "interaction success:" in table.note
+
+
 def test_tables_define_metrics_mark_untouched_objects_and_unapplied_pushes():
     report = _report([_cell("nominal", 0.0, touched=0), _cell("push_0.3", 0.0, pushes=0)])
     table = result_tables(report)[0]

@@ -339,8 +339,8 @@ class InteractionEnv:
         covered = (self.ref_index[done] - self.start_frame[done]).float() >= \
             self.cfg.success_min_frames_fraction * clip_frames
         success = reached_end[done] & ~terminated[done] & covered
-        tracked = (self.episode_max_error_o[done] <= self.cfg.success_max_object_error) & \
-            (self.episode_max_error_h[done] <= self.cfg.success_max_link_error)
+        tracked = termination.interaction_tracked(self.episode_max_error_o[done], self.episode_max_error_h[done],
+                                                  self.cfg.success_max_object_error, self.cfg.success_max_link_error)
         return {
             "success": success.float(),
             "interaction_success": (success & tracked).float(),
