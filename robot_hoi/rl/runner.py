@@ -10,6 +10,7 @@ TensorBoard events, run_info.json (resolved config, obs layout, git commit) and 
 
 from __future__ import annotations
 
+import contextlib
 import json
 import time
 from collections import deque
@@ -53,6 +54,18 @@ _PPO_SCALARS = {
     "actor_lr": "LR/actor",
     "critic_lr": "LR/critic",
 }
+
+
+@contextlib.contextmanager
+def _torch_threads(count: int | None):
+    """torch's CPU thread count set to `count` inside the block (unchanged for None)."""
+    before = torch.get_num_threads()
+    if count is not None:
+        torch.set_num_threads(count)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(before)
 
 
 class OnPolicyRunner:
@@ -118,6 +131,14 @@ class OnPolicyRunner:
         """Called before each rollout (self.iteration = iterations done). Distillation sets its w schedule here."""
 
     # --- training ----------------------------------------------------------------------------------------------
+    def _update_threads(self) -> int | None:
+        """Threads for the PPO update on the CPU: the config's, else the physics pool's (idle meanwhile)."""
+        if self.device.type != "cpu":
+            return None
+        if self.cfg.runner.update_threads is not None:
+            return self.cfg.runner.update_threads
+        return getattr(getattr(self.env, "backend", None), "nthread", None)
+
     def learn(self, budget: Budget) -> dict[str, float]:
         """Train until `budget` (counted from this call) is used up; checkpoints periodically and at the end."""
         if self._obs is None:
@@ -160,7 +181,8 @@ class OnPolicyRunner:
             self.timers.lap("logging")  # the rollout's one read-back of its log values
             env_logs.update(curriculum)
             t1 = time.monotonic()
-            stats = self.alg.update()
+            with _torch_threads(self._update_threads()):
+                stats = self.alg.update()
             t2 = time.monotonic()
             self.timers.lap("update")
             self.iteration += 1

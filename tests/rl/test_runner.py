@@ -172,3 +172,20 @@ def test_interrupt_saves_a_checkpoint_and_reraises(tmp_path):
         runner.learn(Budget(iterations=10))
     runner.close()
     assert read_checkpoint(tmp_path / "model_2.pt")["iteration"] == 2
+
+
+def test_update_runs_on_the_physics_threads_and_the_rollout_keeps_its_own():
+    """The PPO update takes the physics pool's threads (idle while it runs), the rollout keeps torch's setting."""
+    from types import SimpleNamespace
+
+    runner, _ = _runner(num_envs=8)
+    runner.env.backend = SimpleNamespace(nthread=2)  # a CPU physics pool of 2 threads
+    seen = []
+    update = runner.alg.update
+    runner.alg.update = lambda: seen.append(torch.get_num_threads()) or update()
+    runner.learn(Budget(iterations=2))
+    assert seen == [2, 2] and torch.get_num_threads() == 1
+    explicit, _ = _runner(num_envs=8, overrides=["runner.update_threads=3"])
+    assert explicit._update_threads() == 3
+    with pytest.raises(UserError, match="update_threads must be positive"):
+        _runner(overrides=["runner.update_threads=0"])
