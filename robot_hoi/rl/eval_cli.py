@@ -142,6 +142,8 @@ def evaluate(env, model, stochastic: bool = False) -> dict[str, float]:
         "E_o_cm": stats["E_o_cm"].mean().item(),
         "E_o_max_cm": stats["E_o_max_cm"].mean().item(),
         "return": returns[counted].mean().item(),
+        # share of the episodes each termination ended (several can fire on one step; none: the clip's end)
+        "ended_by": {k.split("/", 1)[1]: v.mean().item() for k, v in stats.items() if k.startswith("ended_by/")},
         "clip_duration_s": env.total_frames / env.references[0].fps,
         # how executable the reference is (robot_hoi.retarget.feasibility), when the env knows
         "reference_feasibility": (getattr(env, "reference_feasibility", None) or [None])[0],
@@ -168,3 +170,6 @@ def _print_table(name: str, results, summary) -> None:
                   f"{summary['duration_s']:.2f}", f"{summary['E_h_cm']:.1f}", f"{summary['E_o_cm']:.1f}",
                   f"{summary['E_o_max_cm']:.1f}")
     Console().print(table)
+    for clip, r in results.items():
+        ended = ", ".join(f"{k} {v:.2f}" for k, v in sorted(r["ended_by"].items(), key=lambda kv: -kv[1]) if v > 0)
+        print(f"{clip}: episodes ended by {ended or 'the clip end (no termination)'}")

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import json
 
 import numpy as np
 import pytest
@@ -93,7 +94,11 @@ def test_train_eval_export_check_as_a_user(tmp_path, monkeypatch, capsys):
     assert len(runs) == 1
     capsys.readouterr()
     assert main(["eval", str(runs[0]), "--episodes", "1", "--json"]) == 0
-    assert '"E_h_cm"' in capsys.readouterr().out
+    (clip,) = json.loads(capsys.readouterr().out)["clips"].values()
+    assert clip["E_h_cm"] > 0
+    assert set(clip["ended_by"]) == {"link_deviation", "root_too_low", "object_deviation", "interaction_distance",
+                                     "contact_lost"}
+    assert (clip["success_rate"] == 1.0) == (max(clip["ended_by"].values()) == 0.0)  # no success: a termination
     onnx = tmp_path / "teacher.onnx"
     assert main(["export", "onnx", str(runs[0]), "-o", str(onnx), "--recorded", "20"]) == 0
     capsys.readouterr()

@@ -200,6 +200,7 @@ class InteractionEnv:
         self.psi.observe(self, reward, terminated | truncated)
         done = terminated | truncated
         stats = self._episode_stats(done, terminated, reached_end)
+        stats.update({f"ended_by/{k}": v[done].float() for k, v in reasons.items()})  # what ended each episode
         extras = {"log": self._episode_log(done, stats), "episode": stats}
         if terminated.any():
             extras["log"].update({f"Termination/{k}": v[terminated].float().mean() for k, v in reasons.items()})
