@@ -9,6 +9,11 @@
   `squeeze_depth` further toward the other hand (damped least squares on the wrist Jacobian of the shoulder and
   elbow joints). Only the PD targets (`joint_pos`) carry the squeeze; the reference states and link targets do
   not, so the rewards still ask for the hands on the surface.
+- Load compensation. A PD servo settles where its error balances the load: with the G1's arm gains the bent-over
+  arms sagged 9 cm below the reference and the gripped box hung at the hands' height instead of below the grip,
+  tilted and slipped out. The waist and arm PD targets are offset by tau / kp, tau the static torque that holds the
+  reference pose against gravity and, while the object is held above its resting height, against its weight
+  shared by the holding hands (`compensate_loads`). Only the PD targets carry it, like the squeeze.
 """
 
 from __future__ import annotations
@@ -28,6 +33,7 @@ class ExecutableSettings:
     smoothing_sigma_s: float = 0.03   # s, Gaussian low-pass of those tracks (0: off)
     squeeze_depth: float = 0.06       # m the held hands' PD targets go past the surface, toward each other
     squeeze_damping: float = 1e-3     # damped least squares (m^2)
+    compensate_loads: bool = True     # PD targets offset by the static gravity / held-object torque over kp
 
 
 def limit_speed(track: np.ndarray, max_step: float) -> np.ndarray:
@@ -78,4 +84,33 @@ def squeeze_offsets(model: mujoco.MjModel, qpos: np.ndarray, closure: dict[str, 
             step = j.T @ np.linalg.solve(j @ j.T + settings.squeeze_damping * np.eye(3),
                                          closure[side][t] * settings.squeeze_depth * towards)
             offsets[t, model.jnt_qposadr[joints[side]]] = step
+    return offsets
+
+
+def load_offsets(model: mujoco.MjModel, qpos: np.ndarray, joints: list[str],
+                 carried: dict[str, np.ndarray]) -> np.ndarray:
+    """(T, nq) PD-target offsets tau / kp for the position-actuated `joints`: tau holds each pose (qvel 0) against
+    gravity and against the weights `carried` {body: (T,) N, pulling down at that body's origin}."""
+    data = mujoco.MjData(model)
+    offsets = np.zeros_like(qpos)
+    ids = joint_ids(model, joints)
+    dofs, qadr = model.jnt_dofadr[ids], model.jnt_qposadr[ids]
+    kp = np.zeros(len(ids))
+    for a in range(model.nu):
+        if model.actuator_trntype[a] == mujoco.mjtTrn.mjTRN_JOINT and model.actuator_trnid[a, 0] in ids:
+            kp[list(ids).index(model.actuator_trnid[a, 0])] = model.actuator_gainprm[a, 0]
+    driven = kp > 0
+    bodies = {name: mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, name) for name in carried}
+    jac = np.zeros((3, model.nv))
+    for t in range(len(qpos)):
+        data.qpos[:] = qpos[t]
+        data.qvel[:] = 0.0
+        mujoco.mj_fwdPosition(model, data)
+        mujoco.mj_fwdVelocity(model, data)  # qfrc_bias at rest: gravity only
+        tau = data.qfrc_bias.copy()
+        for name, weight in carried.items():
+            if weight[t] > 0:  # the hand holds the weight up: tau += J^T (0, 0, w)
+                mujoco.mj_jacBody(model, data, jac, None, bodies[name])
+                tau += jac[2] * weight[t]
+        offsets[t, qadr[driven]] = tau[dofs[driven]] / kp[driven]
     return offsets

@@ -8,7 +8,13 @@ from dataclasses import asdict, dataclass, field
 import mujoco
 import numpy as np
 
-from robot_hoi.retarget.executable import ExecutableSettings, limit_speed, smooth_joints, squeeze_offsets
+from robot_hoi.retarget.executable import (
+    ExecutableSettings,
+    limit_speed,
+    load_offsets,
+    smooth_joints,
+    squeeze_offsets,
+)
 from robot_hoi.retarget.hands import GraspRule, HandJoints, closure_profile, finger_angles, holding
 from robot_hoi.retarget.ik import IKResult, IKSettings, IKSolver
 from robot_hoi.retarget.kinematics import (
@@ -40,6 +46,8 @@ class RetargetResult:
     ik: IKResult
     hold: dict[str, np.ndarray]  # side -> (T,) bool, the hand holds the object
     seconds: float  # IK wall time
+
+LIFTED_M = 0.02  # object this far above its lowest height counts as carried (its weight on the hands)
 
 
 def default_qpos(model: mujoco.MjModel, cfg) -> np.ndarray:
@@ -113,6 +121,7 @@ def retarget_targets(
     limited[:, upper_qadr] = limit_speed(limited[:, upper_qadr], options.executable.max_joint_speed / targets.fps)
     result = solver.evaluate(limited, targets.pos, result.iterations, track)
     squeeze = _squeeze(model, cfg, result.qpos, hold, targets.fps, options)
+    loads = _load_compensation(model, result.qpos, hold, targets, options)
     seconds = time.perf_counter() - start
 
     act_qadr = model.jnt_qposadr[model.actuator_trnid[:, 0]]
@@ -121,7 +130,7 @@ def retarget_targets(
         fps=targets.fps,
         qpos=result.qpos,
         qvel=finite_difference_qvel(model, result.qpos, targets.fps),
-        joint_pos=(result.qpos + squeeze)[:, act_qadr],  # PD targets: the state plus the grasp squeeze
+        joint_pos=(result.qpos + squeeze + loads)[:, act_qadr],  # PD targets: state + grasp squeeze + loads
         link_pos=result.link_pos,
         link_quat_wxyz=result.link_quat_wxyz,
         target_pos=targets.pos,
@@ -171,6 +180,26 @@ def _squeeze(model: mujoco.MjModel, cfg, qpos: np.ndarray, hold: dict[str, np.nd
     arms = {side: [f"{side}_shoulder_pitch_joint", f"{side}_shoulder_roll_joint", f"{side}_shoulder_yaw_joint",
                    f"{side}_elbow_joint"] for side in sides}
     return squeeze_offsets(model, qpos, ramp, wrists, arms, options.executable)
+
+
+def _load_compensation(model: mujoco.MjModel, qpos: np.ndarray, hold: dict[str, np.ndarray], targets: RobotTargets,
+                       options: RetargetOptions) -> np.ndarray:
+    """(T, nq) load-compensation offsets for the waist and arm PD targets (executable.py): gravity on the links,
+    and the object's weight (when its mass is known) shared by the holding hands while it is off its rest."""
+    if not options.executable.compensate_loads:
+        return np.zeros_like(qpos)
+    names = [mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_JOINT, j) or "" for j in range(model.njnt)]
+    joints = [n for n in names if n.startswith("waist_") or
+              (n.startswith(("left_", "right_")) and any(k in n for k in ("shoulder", "elbow", "wrist")))]
+    carried = {}
+    if targets.object_mass_kg and set(hold) == {"left", "right"}:
+        z = targets.object_pos[:, 2]
+        lifted = np.clip((z - z.min()) / LIFTED_M, 0.0, 1.0)  # the floor carries the object until it rises
+        both = sum(hold[side].astype(float) for side in hold)
+        for side in hold:
+            share = np.where(hold[side], 1.0 / np.maximum(both, 1.0), 0.0)
+            carried[f"{side}_wrist_yaw_link"] = lifted * share * targets.object_mass_kg * 9.81
+    return load_offsets(model, qpos, joints, carried)
 
 
 def robot_hand_lengths(model: mujoco.MjModel, link_map: dict[str, str]) -> dict[str, float]:

@@ -130,6 +130,7 @@ class RobotTargets:
     object_points_local: np.ndarray  # (P, 3) object surface samples in the object frame
     object_local_distance: Callable[[np.ndarray], np.ndarray] | None = None  # dense surface distance, if known
     object_hull: HullPlanes | None = None  # the object's convex hull (what the simulation collides with)
+    object_mass_kg: float | None = None  # when the clip knows it (the synthetic boxes)
 
     def robot_surface_distance(self, points: np.ndarray) -> np.ndarray:
         """Distance (T, L) of robot-space points (T, L, 3) to the robot-space object surface."""
@@ -365,4 +366,5 @@ def targets_from_clip(clip, cfg, scale: float | None = None, mapping: TargetMapp
         object_points_local=points_local,
         object_local_distance=local_distance,
         object_hull=hull,
+        object_mass_kg=None if clip.object is None else clip.object.mass_kg,
     )

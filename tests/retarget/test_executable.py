@@ -101,3 +101,33 @@ def test_foot_slide_ignores_steps_when_told_where_feet_are_planted():
     soles[:, :, 0] = np.array([0.0, 0.1, 0.3, 0.3])[:, None]
     planted_flags = np.array([False, False, True, True])  # the first moves are a step's lift-off, not a slide
     assert foot_slide(soles, planted=planted_flags) == pytest.approx(0.0)
+
+
+def test_load_offsets_hold_the_pose_a_pd_servo_would_sag_from():
+    """A horizontal 1 kg arm under a kp 50 position servo: targeting the pose itself it sags ~0.05 rad; with the
+    gravity offset it settles on the pose; a weight carried at the tip adds its torque over kp."""
+    import mujoco
+
+    from robot_hoi.retarget.executable import load_offsets
+
+    xml = """<mujoco><option timestep="0.002"/><worldbody><body name="arm">
+      <joint name="shoulder" type="hinge" axis="0 1 0" damping="1"/>
+      <geom type="capsule" fromto="0 0 0 0.5 0 0" size="0.02" mass="1"/>
+      <body name="tip" pos="0.5 0 0"/></body></worldbody>
+      <actuator><position joint="shoulder" kp="50"/></actuator></mujoco>"""
+    model = mujoco.MjModel.from_xml_string(xml)
+    pose = np.zeros((1, 1))
+
+    def settle(target):
+        data = mujoco.MjData(model)
+        data.ctrl[:] = target
+        for _ in range(3000):
+            mujoco.mj_step(model, data)
+        return float(data.qpos[0])
+
+    sag = settle(0.0)
+    assert abs(sag) > 0.04  # gravity (1 kg at 0.25 m) over kp 50: 0.049 rad
+    offset = load_offsets(model, pose, ["shoulder"], {})
+    assert abs(settle(offset[0, 0])) < 0.1 * abs(sag)
+    carried = load_offsets(model, pose, ["shoulder"], {"tip": np.array([5.0])})  # 5 N held at the tip
+    assert abs(carried[0, 0]) > abs(offset[0, 0]) + 0.04  # 5 N x 0.5 m / 50 = 0.05 rad more
