@@ -131,3 +131,18 @@ def test_load_offsets_hold_the_pose_a_pd_servo_would_sag_from():
     assert abs(settle(offset[0, 0])) < 0.1 * abs(sag)
     carried = load_offsets(model, pose, ["shoulder"], {"tip": np.array([5.0])})  # 5 N held at the tip
     assert abs(carried[0, 0]) > abs(offset[0, 0]) + 0.04  # 5 N x 0.5 m / 50 = 0.05 rad more
+
+
+def test_lift_place_grip_keeps_the_wrists_below_the_box_top():
+    """The embedded clip grips the box's sides well below its top: with the grip near the top the Inspire wrists
+    rested on the box and pressed it into the floor (measured 130 N per hand) instead of lifting it."""
+    from robot_hoi.data.synth import TALL_BOX_SIZE_M
+    from robot_hoi.embodiment import load_embodiment
+    from robot_hoi.tasks.interaction import factory
+
+    motion = factory.load_or_retarget(factory.load_source("embedded:lift_place"), load_embodiment("g1_inspire"), None)
+    wrists = [motion.link_names.index(n) for n in ("left_wrist_yaw_link", "right_wrist_yaw_link")]
+    held = motion.anchor[:, wrists].min(axis=1) > 0.5
+    assert held.sum() > 30
+    top = motion.object_pos[held, 2] + TALL_BOX_SIZE_M[2] / 2
+    assert (motion.link_pos[held][:, wrists, 2] < top[:, None] - 0.15).all()
