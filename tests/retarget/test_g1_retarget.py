@@ -6,6 +6,7 @@ import mujoco
 import numpy as np
 import pytest
 
+from robot_hoi.retarget.executable import load_offsets
 from robot_hoi.retarget.report import build_report, hand_surface_distance, object_lifted
 
 
@@ -41,12 +42,17 @@ def _check_physical(result, model):
     np.testing.assert_allclose(np.linalg.norm(motion.qpos[:, 3:7], axis=1), 1.0, atol=1e-9)
     assert np.isfinite(motion.qvel).all()
     act_qadr = model.jnt_qposadr[model.actuator_trnid[:, 0]]
-    # PD targets = the state, except the grasp squeeze on the shoulder/elbow joints while a hand holds
-    squeezed = np.array([("shoulder" in n or "elbow" in n) for n in motion.actuator_names])
-    np.testing.assert_array_equal(motion.joint_pos[:, ~squeezed], motion.qpos[:, act_qadr][:, ~squeezed])
+    # PD targets = the state for legs and fingers; waist and arms add the static load over kp and, while a hand
+    # holds, the grasp squeeze (executable.py)
+    upper = np.array([n.startswith("waist_") or any(k in n for k in ("shoulder", "elbow", "wrist"))
+                      for n in motion.actuator_names])
+    np.testing.assert_array_equal(motion.joint_pos[:, ~upper], motion.qpos[:, act_qadr][:, ~upper])
     held = result.hold["left"] | result.hold["right"]
     free = ~np.convolve(held, np.ones(31), mode="same").astype(bool)  # clear of the closure ramps
-    np.testing.assert_array_equal(motion.joint_pos[free], motion.qpos[free][:, act_qadr])
+    joints = [model.joint(int(j)).name for j in model.actuator_trnid[upper, 0]]
+    gravity = load_offsets(model, motion.qpos[free], joints, {})
+    np.testing.assert_allclose(motion.joint_pos[free], (motion.qpos[free] + gravity)[:, act_qadr], atol=1e-12)
+    assert np.abs(motion.joint_pos - motion.qpos[:, act_qadr]).max() < 0.5  # offsets, not a different pose
 
 
 def test_synthetic_clip_residuals_are_a_few_cm(synthetic):

@@ -119,7 +119,7 @@ def _fake_clip(T=3):
         name="fake", fps=30.0, body_pos=body_pos, body_quat_xyzw=body_quat,
         object_pos=np.tile([3.0, 0.0, 0.5], (T, 1)), object_quat_xyzw=np.tile([0.0, 0.0, 0.0, 1.0], (T, 1)),
         body_contact=np.zeros((T, 52), dtype=np.int8), subject_height_m=2.0,
-        object=SimpleNamespace(sample_points=CUBE_POINTS),
+        object=SimpleNamespace(sample_points=CUBE_POINTS, mass_kg=None),
     )  # fmt: skip
 
 
