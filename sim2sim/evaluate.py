@@ -147,9 +147,9 @@ def evaluate(o: Sim2SimOptions) -> tuple[dict, dict[str, Path]]:
         entry.targets = (clip_targets(entry.contract, o.clips, o.embodiment, o.self_collision, o.clip_options)
                          if o.clips else
                          policy_targets(entry.contract, o.motion, o.embodiment, o.self_collision, o.clip_options))
-    terminations = task_config().terminations
-    thresholds = Thresholds(**{k: getattr(terminations, k) for k in Thresholds.__dataclass_fields__})
-    success_bounds = (task_config().success_max_object_error, task_config().success_max_link_error)
+    task = task_config()
+    thresholds = Thresholds(**{k: getattr(task.terminations, k) for k in Thresholds.__dataclass_fields__})
+    success_bounds = (task.success_max_object_error, task.success_max_link_error)
 
     jobs = []
     for entry in entries:

@@ -121,7 +121,7 @@ def tracking_metrics(link_pos: np.ndarray, ref_link_pos: np.ndarray, object_err_
         "E_h_max_cm": 100.0 * float(body_err[tracked].max()) if tracked.any() else nan,
         "E_o_max_cm": 100.0 * float(object_err[tracked].max()) if tracked.any() else nan,
         "E_h_cm": 100.0 * float(body_err.mean()),
-        "E_o_cm": 100.0 * float(np.mean(object_err_m)),
+        "E_o_cm": 100.0 * float(object_err.mean()),
         "mpjpe_g_mm": 1000.0 * mpjpe_global(pos, ref),
         "mpjpe_mm": 1000.0 * mpjpe_root_relative(pos, ref, root_in_body),
         "e_acc_mm": 1000.0 * acceleration_error(pos, ref),

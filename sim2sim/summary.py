@@ -108,8 +108,6 @@ def _interaction_rate(episodes: list[dict]) -> float | None:
 
 
 def cell_value(cell: dict, key: str) -> float | None:
-    """The success rates as they are, every other metric by its mean."""
-    if key in SUCCESS_KEYS:
-        return cell.get(key)
+    """A rate (the success rates) as it is, a metric's aggregate by its mean."""
     value = cell.get(key)
     return value.get("mean") if isinstance(value, dict) else value

@@ -104,10 +104,11 @@ def load_offsets(model: mujoco.MjModel, qpos: np.ndarray, joints: list[str],
     jac = np.zeros((3, model.nv))
     for t in range(len(qpos)):
         data.qpos[:] = qpos[t]
-        data.qvel[:] = 0.0
-        mujoco.mj_fwdPosition(model, data)
-        mujoco.mj_fwdVelocity(model, data)  # qfrc_bias at rest: gravity only
-        tau = data.qfrc_bias.copy()
+        mujoco.mj_kinematics(model, data)
+        mujoco.mj_comPos(model, data)
+        mujoco.mj_comVel(model, data)  # qvel stays 0: the bias below is gravity only
+        tau = np.zeros(model.nv)
+        mujoco.mj_rne(model, data, 0, tau)
         for name, weight in carried.items():
             if weight[t] > 0:  # the hand holds the weight up: tau += J^T (0, 0, w)
                 mujoco.mj_jacBody(model, data, jac, None, bodies[name])

@@ -121,7 +121,7 @@ def retarget_targets(
     limited[:, upper_qadr] = limit_speed(limited[:, upper_qadr], options.executable.max_joint_speed / targets.fps)
     result = solver.evaluate(limited, targets.pos, result.iterations, track)
     squeeze = _squeeze(model, cfg, result.qpos, hold, targets.fps, options)
-    loads = _load_compensation(model, result.qpos, hold, targets, options)
+    loads = _load_compensation(model, result.qpos, upper, hold, targets, options)
     seconds = time.perf_counter() - start
 
     act_qadr = model.jnt_qposadr[model.actuator_trnid[:, 0]]
@@ -182,15 +182,12 @@ def _squeeze(model: mujoco.MjModel, cfg, qpos: np.ndarray, hold: dict[str, np.nd
     return squeeze_offsets(model, qpos, ramp, wrists, arms, options.executable)
 
 
-def _load_compensation(model: mujoco.MjModel, qpos: np.ndarray, hold: dict[str, np.ndarray], targets: RobotTargets,
-                       options: RetargetOptions) -> np.ndarray:
-    """(T, nq) load-compensation offsets for the waist and arm PD targets (executable.py): gravity on the links,
-    and the object's weight (when its mass is known) shared by the holding hands while it is off its rest."""
+def _load_compensation(model: mujoco.MjModel, qpos: np.ndarray, upper: list[str], hold: dict[str, np.ndarray],
+                       targets: RobotTargets, options: RetargetOptions) -> np.ndarray:
+    """(T, nq) load-compensation offsets for the `upper` (waist and arm) PD targets (executable.py): gravity on the
+    links, and the object's weight (when its mass is known) shared by the holding hands while it is off its rest."""
     if not options.executable.compensate_loads:
         return np.zeros_like(qpos)
-    names = [mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_JOINT, j) or "" for j in range(model.njnt)]
-    joints = [n for n in names if n.startswith("waist_") or
-              (n.startswith(("left_", "right_")) and any(k in n for k in ("shoulder", "elbow", "wrist")))]
     carried = {}
     if targets.object_mass_kg and set(hold) == {"left", "right"}:
         z = targets.object_pos[:, 2]
@@ -199,7 +196,7 @@ def _load_compensation(model: mujoco.MjModel, qpos: np.ndarray, hold: dict[str, 
         for side in hold:
             share = np.where(hold[side], 1.0 / np.maximum(both, 1.0), 0.0)
             carried[f"{side}_wrist_yaw_link"] = lifted * share * targets.object_mass_kg * 9.81
-    return load_offsets(model, qpos, joints, carried)
+    return load_offsets(model, qpos, upper, carried)
 
 
 def robot_hand_lengths(model: mujoco.MjModel, link_map: dict[str, str]) -> dict[str, float]:
