@@ -111,8 +111,9 @@ def _show(args) -> int:
             "total_mass_kg": desc.total_mass, "num_actuators": len(cfg.actuators), "joints": rows,
         }, indent=1))
         return 0
-    from rich.console import Console
     from rich.table import Table
+
+    from robot_hoi.utils.console import table_console
 
     table = Table(title=f"{cfg.name}: {len(cfg.actuators)} actuators, {len(desc.passive_joints)} passive joints, "
                   f"{desc.total_mass:.3f} kg, physics dt {cfg.physics_dt * 1e3:.2f} ms x {cfg.decimation}")
@@ -127,10 +128,7 @@ def _show(args) -> int:
         table.add_row(fmt(r["actuator_index"]), r["name"], kind, f"[{r['range'][0]:.3f}, {r['range'][1]:.3f}]",
                       fmt(r["effort"]), fmt(r["kp"]), fmt(r["kd"]), fmt(r["default"]), fmt(r["action_scale"]),
                       fmt(r["armature"], ".4g"))
-    console = Console()
-    if not console.is_terminal:  # piped: do not squeeze the table into 80 columns
-        console = Console(width=170)
-    console.print(table)
+    table_console().print(table)
     return 0
 
 

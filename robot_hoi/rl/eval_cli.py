@@ -150,14 +150,18 @@ def evaluate(env, model, stochastic: bool = False) -> dict[str, float]:
     }
 
 
+SUMMARY_METRICS = ("success_rate", "interaction_success_rate", "duration_s", "E_h_cm", "E_o_cm", "E_o_max_cm", "return")
+
+
 def summarise(results: dict[str, dict[str, float]]) -> dict[str, float]:
-    keys = ("success_rate", "interaction_success_rate", "duration_s", "E_h_cm", "E_o_cm", "E_o_max_cm")
-    return {k: sum(r[k] for r in results.values()) / max(len(results), 1) for k in keys}
+    """Mean over clips of each per-clip metric (teachers and students alike)."""
+    return {k: sum(r[k] for r in results.values()) / max(len(results), 1) for k in SUMMARY_METRICS}
 
 
 def _print_table(name: str, results, summary) -> None:
-    from rich.console import Console
     from rich.table import Table
+
+    from robot_hoi.utils.console import table_console
 
     table = Table(title=f"robot-hoi eval: {name}")
     for col in ("clip", "episodes", "success", "interaction", "duration (s)", "E_h (cm)", "E_o (cm)", "E_o max"):
@@ -169,7 +173,7 @@ def _print_table(name: str, results, summary) -> None:
     table.add_row("mean", "", f"{summary['success_rate']:.2f}", f"{summary['interaction_success_rate']:.2f}",
                   f"{summary['duration_s']:.2f}", f"{summary['E_h_cm']:.1f}", f"{summary['E_o_cm']:.1f}",
                   f"{summary['E_o_max_cm']:.1f}")
-    Console().print(table)
+    table_console().print(table)
     for clip, r in results.items():
         ended = ", ".join(f"{k} {v:.2f}" for k, v in sorted(r["ended_by"].items(), key=lambda kv: -kv[1]) if v > 0)
         print(f"{clip}: episodes ended by {ended or 'the clip end (no termination)'}")

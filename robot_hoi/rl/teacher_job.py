@@ -252,8 +252,9 @@ def _number(value: float | None) -> str:
 def print_summary(summaries: dict[str, dict], failures: dict[str, str], title: str) -> None:
     """The final table: one row per teacher (failed ones with their error)."""
     from rich import box
-    from rich.console import Console
     from rich.table import Table
+
+    from robot_hoi.utils.console import table_console
 
     table = Table(title=title, box=box.SIMPLE_HEAD, pad_edge=False, show_edge=False, collapse_padding=True)
     for col in ("teacher", "it", "return", "success", "dur s", "E_h cm", "E_o cm", "wall s"):  # host: in the lines
@@ -265,7 +266,7 @@ def print_summary(summaries: dict[str, dict], failures: dict[str, str], title: s
                       f"{ev['duration_s']:.2f}", f"{ev['E_h_cm']:.1f}", f"{ev['E_o_cm']:.1f}", f"{s['wall_s']:.0f}")
     for name in failures:
         table.add_row(name, "-", "failed", *[""] * 5)
-    console = Console()
+    console = table_console()
     console.print(table)
     for name, error in failures.items():
         console.print(f"{name}: {error}", markup=False, highlight=False)

@@ -15,14 +15,9 @@ import json
 from pathlib import Path
 
 from robot_hoi.errors import UserError
-from robot_hoi.student.evaluation import METRICS
+from robot_hoi.rl.eval_cli import summarise
 
 REFERENCES = ("mocap", "distilled")
-
-
-def summarise(results: dict[str, dict[str, float]]) -> dict[str, float]:
-    """Mean over clips of each metric."""
-    return {k: sum(r[k] for r in results.values()) / max(len(results), 1) for k in METRICS}
 
 
 def student_providers(groups: list[str], env, cfg, folder: Path) -> dict:
@@ -113,24 +108,27 @@ def run_student_eval(args: argparse.Namespace, checkpoint: Path) -> int:
     if args.json:
         print(json.dumps(report, indent=2))
         return 0
-    from rich.console import Console
+    from robot_hoi.utils.console import table_console
 
-    console = Console()
+    console = table_console()
     for kind, label in (("mocap", "MoCap reference"), ("distilled", "its distilled reference")):
         if kind in results:
-            console.print(results_table(f"robot-hoi eval: {args.checkpoint} (student, {label})", results[kind]))
+            # the heading on its own line: a table title wraps at the table's width, splitting long paths
+            console.print(f"robot-hoi eval (student, {label}): {args.checkpoint}", markup=False, highlight=False)
+            console.print(results_table(results[kind]))
     return 0
 
 
-def results_table(title: str, results: dict[str, dict[str, float]]):
+def results_table(results: dict[str, dict[str, float]]):
     from rich.table import Table
 
-    table = Table(title=title)
-    for col in ("clip", "episodes", "success", "duration (s)", "E_h (cm)", "E_o (cm)", "return"):
+    table = Table()
+    for col in ("clip", "episodes", "success", "interaction", "duration (s)", "E_h (cm)", "E_o (cm)", "return"):
         table.add_column(col, justify="left" if col == "clip" else "right")
     rows = [*results.items(), ("mean", {"episodes": "", **summarise(results)})]
     for clip, r in rows:
         duration = f"{r['duration_s']:.2f}" + (f" / {r['clip_duration_s']:.2f}" if "clip_duration_s" in r else "")
-        table.add_row(clip, str(r["episodes"]), f"{r['success_rate']:.2f}", duration, f"{r['E_h_cm']:.1f}",
+        table.add_row(clip, str(r["episodes"]), f"{r['success_rate']:.2f}", f"{r['interaction_success_rate']:.2f}",
+                      duration, f"{r['E_h_cm']:.1f}",
                       f"{r['E_o_cm']:.1f}", f"{r['return']:.1f}")
     return table

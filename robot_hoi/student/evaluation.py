@@ -11,8 +11,6 @@ from torch import Tensor
 from robot_hoi.rl.env import concat_groups
 from robot_hoi.rl.eval_cli import evaluate
 
-METRICS = ("success_rate", "duration_s", "E_h_cm", "E_o_cm", "return")
-
 
 class GroupsAsPolicy:
     """Presents the concatenation of `groups` as the "policy" observation, which evaluate() feeds the model."""
@@ -42,9 +40,11 @@ def evaluate_groups(env, model, groups: list[str]) -> dict[str, float]:
 
 def format_table(rows: dict[str, dict[str, dict[str, float]]]) -> list[str]:
     """rows[policy][clip] -> metrics; plain text lines (the CLI prints them, tests read them)."""
-    lines = [f"{'policy':<44} {'clip':<28} {'success':>7} {'dur (s)':>8} {'E_h cm':>7} {'E_o cm':>7} {'return':>7}"]
+    lines = [f"{'policy':<44} {'clip':<28} {'success':>7} {'interact':>8} {'dur (s)':>8} {'E_h cm':>7} {'E_o cm':>7} "
+             f"{'return':>7}"]
     for policy, clips in rows.items():
         for clip, r in clips.items():
-            lines.append(f"{policy:<44} {clip[:28]:<28} {r['success_rate']:>7.2f} {r['duration_s']:>8.2f} "
+            lines.append(f"{policy:<44} {clip[:28]:<28} {r['success_rate']:>7.2f} {r['interaction_success_rate']:>8.2f} "
+                         f"{r['duration_s']:>8.2f} "
                          f"{r['E_h_cm']:>7.1f} {r['E_o_cm']:>7.1f} {r['return']:>7.1f}")
     return lines
