@@ -29,6 +29,9 @@ def register(subparsers) -> None:
     p.add_argument("--episodes", type=int, default=8, help="episodes per clip (run in parallel)")
     p.add_argument("--preset", default="fast", choices=["fast", "paper"], help="network for `untrained`")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                   help="environment override on top of the checkpoint's task config, e.g. --set "
+                        "env.self_collision=true (repeatable; the evaluation protocol's own settings still apply)")
     p.add_argument("--json", action="store_true", help="machine-readable output")
     p.set_defaults(func=run)
 
@@ -68,6 +71,7 @@ def run(args: argparse.Namespace) -> int:
         sources = task["sources"] if task else factory.expand_sources(args.data)
         options = clip_options(args, task.get("clip_options") if task else None)
     embodiment = load_embodiment(args.embodiment)
+    env_cfg = apply_env_overrides(env_cfg, args.overrides)
     evaluation_settings(env_cfg, args.episodes, args.seed)
     env_cfg = resolve_env_cfg(env_cfg)  # once: every clip's env on the same device, the model moved there
 
@@ -88,6 +92,14 @@ def run(args: argparse.Namespace) -> int:
     else:
         _print_table(args.checkpoint, results, summary)
     return 0
+
+
+def apply_env_overrides(env_cfg, overrides: list[str]):
+    """`--set` values for the environment: "env.key=value" or "key=value" (InteractionEnvCfg keys)."""
+    from robot_hoi.utils.config import apply_overrides
+
+    items = [o[len("env."):] if o.startswith("env.") else o for o in overrides]
+    return apply_overrides(env_cfg, items, "--set") if items else env_cfg
 
 
 def evaluation_settings(env_cfg, episodes: int, seed: int) -> None:

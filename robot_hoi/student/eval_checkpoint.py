@@ -37,9 +37,10 @@ def student_providers(groups: list[str], env, cfg, folder: Path) -> dict:
 
 
 def evaluate_student(checkpoint: str | Path, data: list[str] | None = None, episodes: int = 8,
-                     seed: int = 0) -> dict[str, dict[str, dict[str, float]]]:
+                     seed: int = 0, overrides: list[str] | None = None) -> dict[str, dict[str, dict[str, float]]]:
     """results[reference][clip] -> metrics, reference in REFERENCES ("distilled" only where the student had one)."""
     from robot_hoi.embodiment import load_embodiment
+    from robot_hoi.rl.eval_cli import apply_env_overrides
     from robot_hoi.student.checkpoint import load_student
     from robot_hoi.student.evaluation import evaluate_groups
     from robot_hoi.student.student_env import StudentEnv
@@ -64,7 +65,8 @@ def evaluate_student(checkpoint: str | Path, data: list[str] | None = None, epis
     model, cfg, stored = load_student(checkpoint)
     task = read_student_task(checkpoint)
     folder = task_folder(checkpoint)
-    env_cfg = evaluation_cfg(load_dataclass(InteractionEnvCfg, task["env"], f"{folder}/task.json"), episodes, seed)
+    env_cfg = apply_env_overrides(load_dataclass(InteractionEnvCfg, task["env"], f"{folder}/task.json"), overrides or [])
+    env_cfg = evaluation_cfg(env_cfg, episodes, seed)
     groups = list(cfg.runner.actor_obs_groups)
     cases: list[tuple[str, object, object]] = []  # (reference kind, clip, reference motion)
     if data:
@@ -100,7 +102,7 @@ def evaluate_student(checkpoint: str | Path, data: list[str] | None = None, epis
 
 
 def run_student_eval(args: argparse.Namespace, checkpoint: Path) -> int:
-    results = evaluate_student(checkpoint, args.data, args.episodes, args.seed)
+    results = evaluate_student(checkpoint, args.data, args.episodes, args.seed, args.overrides)
     report = {"checkpoint": str(args.checkpoint), "policy_kind": "student",
               "clips": results["mocap"], "mean": summarise(results["mocap"])}
     if "distilled" in results:

@@ -1,7 +1,9 @@
 """Configuration of the interaction-imitation environment (InterMimic Sec. 3.1-3.2, supp. D-F).
 
-Mapped from configs/tasks/interaction.yaml. A reward term set to `null` is disabled. Reward weights are the
-lambdas of supp. F; the total reward is exp(-sum_i lambda_i * E_i) (multiplicative exp aggregation, supp. D.5).
+Mapped from configs/tasks/interaction.yaml. The rewards come from a reward set (configs/tasks/rewards/<name>.yaml:
+the aggregation and the terms; `reward_set` in the task config, or `--rewards NAME`); without one they are
+InterMimic's as written (intermimic_paper: supp. F's lambdas, exp(-sum_i lambda_i * E_i), supp. D.5). A reward term
+set to `null` is disabled.
 """
 
 from __future__ import annotations
@@ -19,23 +21,11 @@ class RewardTermCfg:
     scale: float = 1.0             # the term's share in the "sum" aggregation (ignored by "product")
 
 
+PAPER_REWARD_SET = "intermimic_paper"
+
+
 def _default_rewards() -> dict[str, RewardTermCfg | None]:
-    # InterMimic supp. F: (lp_h, lth_h, l_d, lp_o, lth_o, l_cb, l_cp, l_ch, le_h, le_o, le_f)
-    #                   = (30, 2.5, 5, 0.1, 5, 5, 5, 3, 2e-5, 2e-5, 1e-9)
-    return {
-        "link_pos": RewardTermCfg("link_position_cost", 30.0),
-        "link_rot": RewardTermCfg("link_rotation_cost", 2.5),
-        "interaction": RewardTermCfg("interaction_geometry_cost", 5.0),
-        "object_pos": RewardTermCfg("object_position_cost", 0.1),
-        "object_rot": RewardTermCfg("object_rotation_cost", 5.0),
-        "energy_links": RewardTermCfg("link_acceleration_cost", 2e-5),
-        "energy_object": RewardTermCfg("object_acceleration_cost", 2e-5),
-        "energy_contact": RewardTermCfg("contact_force_cost", 1e-9),
-        # Contact rewards exist but are off for the robot (self-collision is off; supp. F).
-        "contact_promote": None,
-        "contact_penalty": None,
-        "hand_contact": None,
-    }
+    return load_reward_set(PAPER_REWARD_SET)[1]
 
 
 # Early termination (supp. E.1) + interaction early termination (Sec. 3.2): one definition, shared with sim2sim.
@@ -113,6 +103,9 @@ class InteractionEnvCfg:
     # being stepped to (the policy learns corrections; the runtime reads them from the motion sidecar);
     # "default": offset = the default pose (InterMimic's absolute targets).
     action_offset: str = "reference"
+    # A reward set's name (or YAML path): on loading it replaces reward_mode and rewards and is cleared, so the
+    # saved config (task.json) holds the terms themselves and `--set env.rewards.<term>...` overrides stick.
+    reward_set: str | None = None
     reward_mode: str = "product"            # "product": exp(-sum lambda E) (InterMimic) | "sum": weighted sum of exps
     rewards: dict[str, RewardTermCfg | None] = field(default_factory=_default_rewards)
     terminations: TerminationCfg = field(default_factory=TerminationCfg)
@@ -127,6 +120,11 @@ class InteractionEnvCfg:
     success_max_object_error: float = 0.10
     success_max_link_error: float = 0.15
 
+    def __post_init__(self) -> None:
+        if self.reward_set:
+            apply_reward_set(self, self.reward_set)
+            self.reward_set = None
+
 
 def reward_set_names() -> list[str]:
     from robot_hoi.paths import CONFIGS_DIR
@@ -134,8 +132,8 @@ def reward_set_names() -> list[str]:
     return sorted(p.stem for p in (CONFIGS_DIR / "tasks" / "rewards").glob("*.yaml"))
 
 
-def apply_reward_set(cfg: InteractionEnvCfg, name: str) -> None:
-    """Replace the reward terms and aggregation of `cfg` with configs/tasks/rewards/<name>.yaml (or a YAML path)."""
+def load_reward_set(name: str) -> tuple[str, dict[str, RewardTermCfg | None]]:
+    """(reward_mode, rewards) of configs/tasks/rewards/<name>.yaml or of a YAML path."""
     from pathlib import Path
 
     import yaml
@@ -147,10 +145,17 @@ def apply_reward_set(cfg: InteractionEnvCfg, name: str) -> None:
     path = Path(name) if name.endswith((".yaml", ".yml")) else CONFIGS_DIR / "tasks" / "rewards" / f"{name}.yaml"
     if not path.is_file():
         raise UserError(f"{path}: no such reward set (choose from {', '.join(reward_set_names())} or a YAML path)")
-    data = yaml.safe_load(path.read_text()) or {}
-    if set(data) - {"reward_mode", "rewards"} or "rewards" not in data:
+    try:
+        data = yaml.safe_load(path.read_text()) or {}
+    except yaml.YAMLError as exc:
+        raise UserError(f"{path}: not valid YAML ({exc})") from None
+    if not isinstance(data, dict) or set(data) - {"reward_mode", "rewards"} or "rewards" not in data:
         raise UserError(f"{path}: a reward set has the keys reward_mode and rewards only")
-    cfg.reward_mode = data.get("reward_mode", "product")
-    cfg.rewards = {k: None if v is None else load_dataclass(RewardTermCfg, v, f"{path} rewards.{k}")
-                   for k, v in data["rewards"].items()}
+    rewards = {k: None if v is None else load_dataclass(RewardTermCfg, v, f"{path} rewards.{k}")
+               for k, v in data["rewards"].items()}
+    return data.get("reward_mode", "product"), rewards
 
+
+def apply_reward_set(cfg: InteractionEnvCfg, name: str) -> None:
+    """Replace the reward terms and aggregation of `cfg` with those of the reward set `name`."""
+    cfg.reward_mode, cfg.rewards = load_reward_set(name)
