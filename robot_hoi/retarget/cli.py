@@ -106,6 +106,10 @@ def format_feasibility(f: dict) -> str:
     lines = [f"feasibility: foot slide in contact {slide}; CoM outside support in "
              f"{100 * f['com_outside_support_fraction']:.0f}% of frames; joint speed peak "
              f"{f['joint_speed_peak_rad_s']} rad/s (p99 {f['joint_speed_p99_rad_s']})"]
+    if "self_penetration_cm" in f:
+        pairs = ", ".join(f"{k} {v} cm" for k, v in f["self_penetration_pairs"].items()) or "none over 1 cm"
+        lines.append(f"self-penetration (self-collision on): deepest {f['self_penetration_cm']} cm, "
+                     f"{100 * f['self_penetration_fraction']:.0f}% of frames over 1 cm ({pairs})")
     if hold:
         lines.append(f"hold test (root held, zero residual): object drop {hold['object_drop_cm']} cm over "
                      f"{hold['frames_held']} held frames; {'ran to the end' if hold['completed'] else 'ended early'}"

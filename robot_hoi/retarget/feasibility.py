@@ -6,7 +6,10 @@
   of a step are not slides;
 - centre of mass outside support: share of frames whose whole-body CoM (projected on the floor) lies outside
   the convex hull of the sole points touching the floor, by more than `com_margin`;
-- peak and p99 joint speed of the actuated body joints (what reference-state starts copy as velocities).
+- peak and p99 joint speed of the actuated body joints (what reference-state starts copy as velocities);
+- self-penetration: the deepest overlap of two robot bodies (hands in thighs, arms in the torso) and the share of
+  frames with one deeper than 1 cm, on the model with self-collision on. Teachers train with self-collision off
+  (InterMimic supp. F), so such a reference trains; the real robot (and sim2sim) cannot follow it there.
 
 The dynamic hold test (does the grasp keep the object in a root-held replay) needs the training scene and lives in
 robot_hoi.tasks.interaction.feasibility. All lengths in the returned dict are in cm, speeds in rad/s.
@@ -72,9 +75,38 @@ def support_distance(com_xy: np.ndarray, contact_points_xy: np.ndarray) -> float
     return float((hull.equations[:, :2] @ com_xy + hull.equations[:, 2]).max())
 
 
+def self_penetration(model: mujoco.MjModel, qpos: np.ndarray, tolerance: float = 0.01, top: int = 3) -> dict:
+    """Robot-robot overlaps along a qpos track, on `model` compiled with self-collision on: the deepest (cm), the
+    share of frames with one deeper than `tolerance` (m), and the `top` body pairs by depth."""
+    data = mujoco.MjData(model)
+    pairs: dict[str, float] = {}
+    frames = 0
+    for q in qpos:
+        data.qpos[:] = q
+        mujoco.mj_fwdPosition(model, data)
+        deepest = 0.0
+        for contact in data.contact[: data.ncon]:
+            b1, b2 = model.geom_bodyid[contact.geom1], model.geom_bodyid[contact.geom2]
+            if b1 == 0 or b2 == 0:  # the world (floor): not a self-contact
+                continue
+            depth = max(-float(contact.dist), 0.0)
+            key = " / ".join(sorted((model.body(b1).name, model.body(b2).name)))
+            pairs[key] = max(pairs.get(key, 0.0), depth)
+            deepest = max(deepest, depth)
+        frames += deepest > tolerance
+    worst = sorted(pairs.items(), key=lambda kv: -kv[1])[:top]
+    return {
+        "self_penetration_cm": round(100 * max(pairs.values(), default=0.0), 2),
+        "self_penetration_fraction": round(frames / max(len(qpos), 1), 3),
+        "self_penetration_pairs": {k: round(100 * v, 2) for k, v in worst if v > tolerance},
+    }
+
+
 def kinematic_feasibility(model: mujoco.MjModel, motion, foot_bodies: list[str], body_joint_ids: list[int],
-                          contact_height: float = 0.01, com_margin: float = 0.0) -> dict:
-    """Foot slide, CoM-outside-support share and joint speeds of a RobotMotion (see the module docstring)."""
+                          contact_height: float = 0.01, com_margin: float = 0.0,
+                          self_collision_model: mujoco.MjModel | None = None) -> dict:
+    """Foot slide, CoM-outside-support share, joint speeds and (given `self_collision_model`) self-penetration of a
+    RobotMotion (see the module docstring)."""
     from robot_hoi.retarget.targets import TargetMapping, planted
 
     soles = foot_sole_world(model, motion.qpos, foot_bodies)
@@ -90,9 +122,12 @@ def kinematic_feasibility(model: mujoco.MjModel, motion, foot_bodies: list[str],
         touching = points[t][points[t, :, 2] < contact_height, :2]
         outside.append(support_distance(com[t, :2], touching) > com_margin)
     speed = np.abs(np.diff(motion.joint_pos[:, body_joint_ids], axis=0)) * motion.fps
-    return {
+    report = {
         "foot_slide_cm": slide,
         "com_outside_support_fraction": round(float(np.mean(outside)), 3),
         "joint_speed_peak_rad_s": round(float(speed.max()) if speed.size else 0.0, 2),
         "joint_speed_p99_rad_s": round(float(np.percentile(speed, 99)) if speed.size else 0.0, 2),
     }
+    if self_collision_model is not None:
+        report.update(self_penetration(self_collision_model, motion.qpos))
+    return report

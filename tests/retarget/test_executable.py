@@ -146,3 +146,22 @@ def test_lift_place_grip_keeps_the_wrists_below_the_box_top():
     assert held.sum() > 30
     top = motion.object_pos[held, 2] + TALL_BOX_SIZE_M[2] / 2
     assert (motion.link_pos[held][:, wrists, 2] < top[:, None] - 0.15).all()
+
+
+def test_self_penetration_finds_a_hand_pushed_into_the_thigh():
+    from robot_hoi.embodiment import build_model, load_embodiment
+    from robot_hoi.retarget.feasibility import self_penetration
+
+    emb = load_embodiment("g1_inspire")
+    model = build_model(emb, self_collision=True)
+    stand = np.asarray(model.qpos0, dtype=float).copy()
+    stand[:7] = [0, 0, 0.8, 1, 0, 0, 0]
+    for name, value in zip(emb.actuator_names, emb.default_pos, strict=True):
+        stand[model.jnt_qposadr[model.joint(name).id]] = value
+    assert self_penetration(model, stand[None])["self_penetration_fraction"] == 0.0  # the default stand is clear
+    inward = stand.copy()  # left arm swung across the body: the hand ends inside the thighs / pelvis
+    inward[model.jnt_qposadr[model.joint("left_shoulder_roll_joint").id]] = -0.6
+    inward[model.jnt_qposadr[model.joint("left_elbow_joint").id]] = 0.0
+    report = self_penetration(model, np.stack([stand, inward]))
+    assert report["self_penetration_cm"] > 1.0 and report["self_penetration_fraction"] == 0.5
+    assert any("left" in pair or "pelvis" in pair or "torso" in pair for pair in report["self_penetration_pairs"])

@@ -106,14 +106,16 @@ def load_or_retarget(clip, embodiment, cache: Path | None):
 
 
 def kinematic_report(motion, embodiment) -> dict:
-    """Foot slide, CoM outside support and joint speeds of a retarget (robot_hoi.retarget.feasibility)."""
+    """Foot slide, CoM outside support, joint speeds and self-penetration of a retarget
+    (robot_hoi.retarget.feasibility)."""
     from robot_hoi.embodiment import build_model
     from robot_hoi.retarget.feasibility import kinematic_feasibility
 
     hand_joints = {c.joint for hand in embodiment.hands.values() for c in hand.channels}
     body = [i for i, n in enumerate(embodiment.actuator_names) if n not in hand_joints]
     feet = [n for n in embodiment.link_map if "ankle_roll" in n]
-    return kinematic_feasibility(build_model(embodiment), motion, feet, body)
+    return kinematic_feasibility(build_model(embodiment), motion, feet, body,
+                                 self_collision_model=build_model(embodiment, self_collision=True))
 
 
 def make_env(clips: list, env_cfg: InteractionEnvCfg, embodiment, cache: Path | None = None, motions=None):
