@@ -7,7 +7,12 @@ import torch
 
 from robot_hoi.cli import main
 from robot_hoi.errors import UserError
-from robot_hoi.student.config import STUDENT_FAST_CONFIG, load_student_config, option_overrides
+from robot_hoi.student.config import (
+    STUDENT_CONFIG,
+    STUDENT_FAST_CONFIG,
+    load_student_config,
+    option_overrides,
+)
 from robot_hoi.student.teachers import latest_checkpoint
 
 from .conftest import student_args
@@ -23,8 +28,9 @@ def test_option_presets_set_what_they_say():
     assert cfg.skillmimic.enabled and not cfg.skillmimic.history
     cfg, _ = load_student_config(STUDENT_FAST_CONFIG, ["ppo_only"])
     assert (cfg.distill.weights, cfg.distill.lambda_ppo, cfg.distill.lambda_kd, cfg.distill.beta) == ("fixed", 1, 0, 0)
-    cfg, _ = load_student_config(STUDENT_FAST_CONFIG, ["dagger_only"])
-    assert (cfg.distill.lambda_ppo, cfg.distill.lambda_kd) == (0.0, 1.0)
+    assert load_student_config(STUDENT_CONFIG)[0].distill.weights == "schedule"  # the paper preset: DAgger -> PPO
+    cfg, _ = load_student_config(STUDENT_CONFIG, ["dagger_only"])
+    assert (cfg.distill.weights, cfg.distill.lambda_ppo, cfg.distill.lambda_kd) == ("fixed", 0.0, 1.0)
     cfg, _ = load_student_config(STUDENT_FAST_CONFIG, ["no_reference_distillation"],
                                  ["distill.reference=teacher"])  # --set wins over an option
     assert cfg.distill.reference == "teacher"

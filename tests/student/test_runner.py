@@ -49,7 +49,7 @@ def record_executed(runner):
 
 
 def test_schedule_mixture_and_stored_actions(scene):
-    runner, memory, composite = build(scene, ["distill.beta=4"])
+    runner, memory, composite = build(scene, ["distill.beta=4", "distill.weights=schedule"])
     executed = record_executed(runner)
     runner.learn(Budget(iterations=1))
     # t = 0: every executed action is the teacher's (Alg. 1 line 10) ...
