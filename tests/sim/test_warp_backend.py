@@ -147,7 +147,7 @@ def test_overflow_flags_are_read_cleared_and_name_the_buffer_to_raise(scene):
         warp.physics_report()
 
 
-def test_train_cli_runs_a_teacher_on_the_warp_backend(tmp_path):
+def test_train_cli_runs_a_teacher_and_its_student_on_the_warp_backend(tmp_path):
     from robot_hoi.cli import main
 
     out = tmp_path / "run"
@@ -161,6 +161,15 @@ def test_train_cli_runs_a_teacher_on_the_warp_backend(tmp_path):
     assert (group / "model_2.pt").exists() and (group / "eval.json").exists()
     task = (group / "task.json").read_text()
     assert '"backend": "warp"' in task
+    # the student pipeline on the same warp teacher: rollouts, distillation and its evaluation on warp's device
+    # (MoCap reference: this teacher's episodes end on their first step, too short to distil a reference from)
+    student = tmp_path / "student"
+    code = main(["train", "student", "--teachers", str(out), "--backend", "warp", "--budget", "2it", "--out",
+                 str(student), "--set", "env.num_envs=4", "--set", "ppo.horizon=8", "--set", "runner.tensorboard=false",
+                 "--eval-episodes", "1", "--set", "distill.reference=mocap"])
+    assert code == 0
+    assert (student / "student" / "model_2.pt").exists() and (student / "student" / "eval.json").exists()
+    assert '"backend": "warp"' in (student / "student" / "task.json").read_text()
 
 
 def test_sim_device_picks_the_warp_device_and_refuses_unknown_ones():
