@@ -175,7 +175,7 @@ def _print_table(name: str, results, summary) -> None:
 
     from robot_hoi.utils.console import table_console
 
-    table = Table(title=f"robot-hoi eval: {name}")
+    table = Table()
     for col in ("clip", "episodes", "success", "interaction", "duration (s)", "E_h (cm)", "E_o (cm)", "E_o max"):
         table.add_column(col, justify="right" if col != "clip" else "left")
     for clip, r in results.items():
@@ -185,7 +185,10 @@ def _print_table(name: str, results, summary) -> None:
     table.add_row("mean", "", f"{summary['success_rate']:.2f}", f"{summary['interaction_success_rate']:.2f}",
                   f"{summary['duration_s']:.2f}", f"{summary['E_h_cm']:.1f}", f"{summary['E_o_cm']:.1f}",
                   f"{summary['E_o_max_cm']:.1f}")
-    table_console().print(table)
+    console = table_console()
+    # the heading on its own line: a table title wraps at the table's width, splitting long checkpoint paths
+    console.print(f"robot-hoi eval: {name}", markup=False, highlight=False)
+    console.print(table)
     for clip, r in results.items():
         ended = ", ".join(f"{k} {v:.2f}" for k, v in sorted(r["ended_by"].items(), key=lambda kv: -kv[1]) if v > 0)
         print(f"{clip}: episodes ended by {ended or 'the clip end (no termination)'}")

@@ -115,7 +115,7 @@ def run_student_eval(args: argparse.Namespace, checkpoint: Path) -> int:
     console = table_console()
     for kind, label in (("mocap", "MoCap reference"), ("distilled", "its distilled reference")):
         if kind in results:
-            # the heading on its own line: a table title wraps at the table's width, splitting long paths
+            # the heading on its own line, as the teacher's table (robot_hoi/rl/eval_cli.py)
             console.print(f"robot-hoi eval (student, {label}): {args.checkpoint}", markup=False, highlight=False)
             console.print(results_table(results[kind]))
     return 0
@@ -131,6 +131,5 @@ def results_table(results: dict[str, dict[str, float]]):
     for clip, r in rows:
         duration = f"{r['duration_s']:.2f}" + (f" / {r['clip_duration_s']:.2f}" if "clip_duration_s" in r else "")
         table.add_row(clip, str(r["episodes"]), f"{r['success_rate']:.2f}", f"{r['interaction_success_rate']:.2f}",
-                      duration, f"{r['E_h_cm']:.1f}",
-                      f"{r['E_o_cm']:.1f}", f"{r['return']:.1f}")
+                      duration, f"{r['E_h_cm']:.1f}", f"{r['E_o_cm']:.1f}", f"{r['return']:.1f}")
     return table
