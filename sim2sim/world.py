@@ -18,6 +18,7 @@ from collections.abc import Callable
 import mujoco
 import numpy as np
 
+from robot_hoi.sim.scene import with_body_mass
 from sim2sim.layout import WorldLayout
 from sim2sim.perturbations import Perturbation
 
@@ -39,7 +40,7 @@ class SimWorld:
         self.perturbation = perturbation
         self.physics = perturbation.physics
         self.physics.apply(model)
-        self._apply_model_perturbations()
+        self.model = model = self._perturbed(model)
         model.eq_solref[layout.gantry_eq] = GANTRY_SOLREF
         self.data = mujoco.MjData(model)
         self.rng = rng
@@ -64,13 +65,13 @@ class SimWorld:
         self.torque_saturated_updates = 0
 
     # ------------------------------------------------------------------ set-up
-    def _apply_model_perturbations(self) -> None:
-        p, m, lay = self.perturbation, self.model, self.layout
+    def _perturbed(self, m: mujoco.MjModel) -> mujoco.MjModel:
+        p, lay = self.perturbation, self.layout
         if p.friction_scale != 1.0:
             m.geom_friction[lay.friction_geoms, 0] *= p.friction_scale
         if p.object_mass_scale != 1.0:
-            m.body_mass[lay.object_body] *= p.object_mass_scale
-            m.body_inertia[lay.object_body] *= p.object_mass_scale
+            m = with_body_mass(m, lay.object_body, p.object_mass_scale * float(m.body_mass[lay.object_body]))
+        return m
 
     @property
     def t(self) -> float:

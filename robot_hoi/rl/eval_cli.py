@@ -71,8 +71,8 @@ def run(args: argparse.Namespace) -> int:
         sources = task["sources"] if task else factory.expand_sources(args.data)
         options = clip_options(args, task.get("clip_options") if task else None)
     embodiment = load_embodiment(args.embodiment)
-    env_cfg = apply_env_overrides(env_cfg, args.overrides)
     evaluation_settings(env_cfg, args.episodes, args.seed)
+    env_cfg = apply_env_overrides(env_cfg, args.overrides)  # after: `--set` may evaluate under other settings
     env_cfg = resolve_env_cfg(env_cfg)  # once: every clip's env on the same device, the model moved there
 
     results = {}
@@ -104,13 +104,16 @@ def apply_env_overrides(env_cfg, overrides: list[str]):
 
 def evaluation_settings(env_cfg, episodes: int, seed: int) -> None:
     """Turn a training env config into the evaluation one (in place): `episodes` stand starts, no noise, no PSI,
-    no assist wrenches."""
+    no assist wrenches, no domain randomisation (the clip's own object)."""
+    from robot_hoi.tasks.interaction.env_cfg import RandomizationCfg
+
     env_cfg.num_envs = episodes
     env_cfg.seed = seed
     env_cfg.init.stand_start_probability = 1.0
     env_cfg.init.spawn_noise_xy = 0.0
     env_cfg.psi.enabled = False
     env_cfg.assist.enabled = False  # a training curriculum: never in evaluation
+    env_cfg.randomization = RandomizationCfg()
 
 
 def evaluate(env, model, stochastic: bool = False) -> dict[str, float]:

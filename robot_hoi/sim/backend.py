@@ -52,6 +52,12 @@ class PhysicsBackend(ABC):
     def set_state(self, env_ids: Tensor, qpos: Tensor, qvel: Tensor) -> None:
         """Overwrite the state of `env_ids` and recompute their sensors."""
 
+    @abstractmethod
+    def set_body_mass(self, env_ids: Tensor, body_id: int, mass: Tensor) -> None:
+        """Give body `body_id` of the environments `env_ids` the masses `mass` (kg; inertia scaled alike, derived
+        constants recomputed: sim.scene.with_body_mass). One body per backend is varied this way; the rest of every
+        environment's model stays the backend's `model`. Takes effect from the next step."""
+
     @property
     @abstractmethod
     def qpos(self) -> Tensor:

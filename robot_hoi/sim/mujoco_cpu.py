@@ -15,6 +15,7 @@ from mujoco import rollout
 from torch import Tensor
 
 from robot_hoi.sim.backend import PhysicsBackend
+from robot_hoi.sim.scene import with_body_mass
 
 _STATE_SPEC = mujoco.mjtState.mjSTATE_FULLPHYSICS.value
 _CTRL_SPEC = mujoco.mjtState.mjSTATE_CTRL.value
@@ -48,6 +49,9 @@ class MujocoCpuBackend(PhysicsBackend):
         # A zero-timestep twin computes sensors of a given state without advancing it (used on reset).
         self._kin_model = _zero_timestep_copy(model)
         self._models = [model] * num_envs  # rollout's fast path takes one model per environment
+        self._kin_models = [self._kin_model] * num_envs
+        self._mass_variants: dict[tuple[int, float], tuple[mujoco.MjModel, mujoco.MjModel]] = {}
+        self._varied_body: int | None = None
 
         self.nstate = mujoco.mj_stateSize(model, _STATE_SPEC)
         self._qpos_slice = _state_slice(model, mujoco.mjtState.mjSTATE_QPOS)
@@ -114,10 +118,23 @@ class MujocoCpuBackend(PhysicsBackend):
         state_out = np.zeros((ids.size, 1, self.nstate))
         sens_out = np.zeros((ids.size, 1, self.model.nsensordata))
         self._pool.rollout(
-            [self._kin_model] * ids.size, self._datas, np.ascontiguousarray(state), ctrl,
+            [self._kin_models[i] for i in ids], self._datas, np.ascontiguousarray(state), ctrl,
             skip_checks=True, nstep=1, state=state_out, sensordata=sens_out,
         )
         self._sensordata[ids] = sens_out[:, 0]
+
+    def set_body_mass(self, env_ids: Tensor, body_id: int, mass: Tensor) -> None:
+        """Each distinct mass is one model copy (with its zero-timestep twin), shared by every env that has it:
+        callers keep the number of distinct masses small (the interaction env draws them on a 2 % grid)."""
+        if self._varied_body not in (None, body_id):
+            raise ValueError(f"body {self._varied_body} already has per-env masses; one body per backend")
+        self._varied_body = body_id
+        for i, kg in zip(env_ids.tolist(), mass.detach().double().cpu().tolist(), strict=True):  # resets only
+            key = (body_id, round(kg, 9))
+            if key not in self._mass_variants:
+                variant = with_body_mass(self.model, body_id, kg)
+                self._mass_variants[key] = (variant, _zero_timestep_copy(variant))
+            self._models[i], self._kin_models[i] = self._mass_variants[key]
 
     # ---- views ------------------------------------------------------------------------------------------------
     @property

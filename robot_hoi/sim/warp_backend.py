@@ -16,12 +16,14 @@ the buffer to raise when one overflowed.
 from __future__ import annotations
 
 import mujoco
+import numpy as np
 import torch
 from torch import Tensor
 
 from robot_hoi.errors import UserError
 from robot_hoi.sim.backend import PhysicsBackend
 from robot_hoi.sim.device import import_warp, resolve_physics
+from robot_hoi.sim.scene import with_body_mass
 
 # Per-world capacities. Contacts are pooled across worlds (one world may exceed this); constraint rows are not:
 # pyramidal condim-3 contacts take 4 rows each, plus joint limits and the hands' mimic equalities.
@@ -59,6 +61,7 @@ class MujocoWarpBackend(PhysicsBackend):
         mujoco.mj_forward(model, data)
         with wp.ScopedDevice(self._wp_device):
             self._m = mjw.put_model(model)
+            self._batch_mass_fields(model, num_envs)
             self._d = mjw.put_data(model, data, nworld=num_envs, nconmax=CONTACTS_PER_WORLD, njmax=CONSTRAINT_ROWS)
         view = wp.to_torch
         self._qpos_t, self._qvel_t = view(self._d.qpos), view(self._d.qvel)
@@ -71,6 +74,32 @@ class MujocoWarpBackend(PhysicsBackend):
         self.high_water = {"constraint_rows": 0, "contacts_per_world": 0}
         self._step_graph = self._forward_graph = None
         self.stepping = self._capture_graphs()
+
+    # Per-world mass properties (set_body_mass): MJWarp reads a field with a leading world axis per world.
+    _MASS_FIELDS = ("body_mass", "body_subtreemass", "body_inertia", "body_invweight0")
+
+    def _batch_mass_fields(self, model: mujoco.MjModel, num_envs: int) -> None:
+        """Give the mass fields one row per world before any graph is captured (later writes are in place)."""
+        wp = self._wp
+        for name in self._MASS_FIELDS:
+            field = getattr(self._m, name)
+            rows = np.repeat(np.asarray(getattr(model, name), dtype=np.float32)[None], num_envs, axis=0)
+            setattr(self._m, name, wp.array(rows, dtype=field.dtype))
+        self._mass_views = {name: wp.to_torch(getattr(self._m, name)) for name in self._MASS_FIELDS}
+        self._mass_variants: dict[tuple[int, float], dict[str, Tensor]] = {}
+
+    def set_body_mass(self, env_ids: Tensor, body_id: int, mass: Tensor) -> None:
+        ids = env_ids.to(self.device)
+        rows = []
+        for kg in mass.detach().double().cpu().tolist():  # resets only; a few distinct masses (see the CPU backend)
+            key = (body_id, round(kg, 9))
+            if key not in self._mass_variants:
+                variant = with_body_mass(self.model, body_id, kg)
+                self._mass_variants[key] = {name: torch.as_tensor(getattr(variant, name), dtype=torch.float32,
+                                                                  device=self.device) for name in self._MASS_FIELDS}
+            rows.append(self._mass_variants[key])
+        for name, view in self._mass_views.items():
+            view[ids] = torch.stack([r[name] for r in rows]).reshape(view[ids].shape)
 
     # ---- CUDA graphs ------------------------------------------------------------------------------------------
     def _capture_graphs(self) -> str:

@@ -65,8 +65,8 @@ def evaluate_student(checkpoint: str | Path, data: list[str] | None = None, epis
     model, cfg, stored = load_student(checkpoint)
     task = read_student_task(checkpoint)
     folder = task_folder(checkpoint)
-    env_cfg = apply_env_overrides(load_dataclass(InteractionEnvCfg, task["env"], f"{folder}/task.json"), overrides or [])
-    env_cfg = evaluation_cfg(env_cfg, episodes, seed)
+    env_cfg = evaluation_cfg(load_dataclass(InteractionEnvCfg, task["env"], f"{folder}/task.json"), episodes, seed)
+    env_cfg = apply_env_overrides(env_cfg, overrides or [])  # after: `--set` may evaluate under other settings
     groups = list(cfg.runner.actor_obs_groups)
     cases: list[tuple[str, object, object]] = []  # (reference kind, clip, reference motion)
     if data:

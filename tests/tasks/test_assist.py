@@ -86,6 +86,17 @@ def test_evaluation_never_assists():
     assert not cfg.assist.enabled and assist_level(cfg.assist, 0) == 0.0
 
 
+def test_evaluation_uses_the_clips_object_unless_set_otherwise():
+    from robot_hoi.rl.eval_cli import apply_env_overrides, evaluation_settings
+
+    cfg = InteractionEnvCfg()
+    cfg.randomization.object_mass_scale = (0.5, 2.0)  # as trained
+    evaluation_settings(cfg, 4, 0)
+    assert cfg.randomization.object_mass_scale == (1.0, 1.0)
+    cfg = apply_env_overrides(cfg, ["env.randomization.object_mass_scale=[2, 2]"])  # `robot-hoi eval --set`
+    assert tuple(cfg.randomization.object_mass_scale) == (2.0, 2.0)
+
+
 def test_compact_observation_is_small_and_matches_its_spec(scene):
     from robot_hoi.tasks.interaction.mdp.observations import teacher_observation_spec
 

@@ -103,3 +103,27 @@ def test_falling_robot_terminates(scene):
     env.ref_link_pos += torch.tensor([0.0, 0.0, 1.0])
     _, _, terminated, _, _ = env.step(torch.zeros(8, env.num_actions))
     assert terminated.all()
+
+
+def test_object_mass_randomisation_draws_per_episode_masses_the_physics_uses(scene):
+    from robot_hoi.errors import UserError
+    from robot_hoi.tasks.interaction.env_cfg import RandomizationCfg
+
+    base = scene.object_mass
+    body = scene.object_body_id()
+    env = make_env(scene)
+    assert torch.equal(env.object_mass, torch.full((8,), base))  # off by default: the clip's mass
+    env = make_env(scene, randomization=RandomizationCfg(object_mass_scale=(0.5, 2.0)))
+    masses = env.object_mass / base
+    assert masses.min() >= 0.5 - 1e-6 and masses.max() <= 2.0 + 1e-6 and masses.unique().numel() > 3
+    grid = torch.log(masses.double()) / torch.log(torch.tensor(1.02, dtype=torch.float64))
+    assert torch.allclose(grid, grid.round(), atol=1e-4)  # a 2 % grid: few distinct physics models
+    # the physics steps each env with its drawn mass
+    models = env.backend._models
+    assert [float(m.body_mass[body]) for m in models] == pytest.approx(env.object_mass.tolist(), rel=1e-6)
+    env.step(torch.zeros(8, env.num_actions))
+    # an eval at one fixed scale
+    env = make_env(scene, randomization=RandomizationCfg(object_mass_scale=(2.0, 2.0)))
+    assert torch.allclose(env.object_mass, torch.full((8,), 2 * base))
+    with pytest.raises(UserError, match="object_mass_scale"):
+        make_env(scene, randomization=RandomizationCfg(object_mass_scale=(2.0, 1.0)))

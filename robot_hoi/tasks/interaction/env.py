@@ -7,6 +7,7 @@ composes them. All tensors are batched over environments; no per-environment Pyt
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, fields
 from types import SimpleNamespace
 
@@ -96,7 +97,11 @@ class InteractionEnv:
         self.reward_scales = {n: t.scale for n, t in cfg.rewards.items() if t is not None}
         if cfg.reward_mode not in ("product", "sum"):
             raise UserError(f"env.reward_mode must be 'product' or 'sum', not {cfg.reward_mode!r}")
-        self.object_mass = scene.object_mass
+        lo, hi = cfg.randomization.object_mass_scale
+        if not 0 < lo <= hi:
+            raise UserError(f"env.randomization.object_mass_scale must be 0 < low <= high, not {[lo, hi]}")
+        self._object_log_scale_range = (math.log(lo), math.log(hi))
+        self.object_mass = torch.full((cfg.num_envs,), scene.object_mass, device=self.device)  # kg, per env
         self.assist_level = assist_terms.assist_level(cfg.assist, 0)
         self.feet_link_mask = torch.zeros(layout.num_links, device=self.device)
         self.feet_link_mask[scene.feet_link_ids] = 1.0
@@ -416,6 +421,8 @@ class InteractionEnv:
         self.episode_length[env_ids] = 0
         self.assisted[env_ids] = (torch.rand(n, generator=self.generator, device=self.device)
                                   < self.cfg.assist.assisted_share).float()
+        if self._object_log_scale_range != (0.0, 0.0):
+            self._draw_object_mass(env_ids)
         self.tracked_steps[env_ids] = 0
         self.start_frame[env_ids] = frame
         self.contact_loss_frames[env_ids] = 0
@@ -430,6 +437,15 @@ class InteractionEnv:
         self.prev_link_vel[env_ids] = self.link_vel[env_ids]
         self.prev_object_vel[env_ids] = self.object_lin_vel[env_ids]
         self.psi.on_reset(env_ids)
+
+    def _draw_object_mass(self, env_ids: Tensor) -> None:
+        """Object mass x a log-uniform scale on a 2 % grid (a few distinct models for the CPU backend to share)."""
+        lo, hi = self._object_log_scale_range
+        step = math.log(1.02)
+        log_scale = lo + (hi - lo) * torch.rand(env_ids.numel(), generator=self.generator, device=self.device)
+        log_scale = ((log_scale / step).round() * step).clamp(lo, hi)
+        self.object_mass[env_ids] = self.scene.object_mass * log_scale.exp()
+        self.backend.set_body_mass(env_ids, self.scene.object_body_id(), self.object_mass[env_ids])
 
     def _random_frames(self, clip: Tensor) -> Tensor:
         lo, hi = self.cfg.init.start_range

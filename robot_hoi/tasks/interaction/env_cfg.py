@@ -79,6 +79,15 @@ class AssistCfg:
 
 
 @dataclass
+class RandomizationCfg:
+    """Per-episode domain randomisation in training (evaluation uses the same keys to test one setting)."""
+
+    # Object mass x scale, drawn log-uniform per episode on a 2 % grid (inertia scaled alike). (1, 1) = off.
+    # A policy trained at exactly the clip's mass drops the box at x0.5 and at x2 (sim2sim robust suite).
+    object_mass_scale: tuple[float, float] = (1.0, 1.0)
+
+
+@dataclass
 class InteractionEnvCfg:
     embodiment: str = "g1_inspire"
     num_envs: int = 64
@@ -112,6 +121,7 @@ class InteractionEnvCfg:
     init: InitCfg = field(default_factory=InitCfg)
     psi: PsiCfg = field(default_factory=PsiCfg)
     assist: AssistCfg = field(default_factory=AssistCfg)
+    randomization: RandomizationCfg = field(default_factory=RandomizationCfg)
     success_min_frames_fraction: float = 0.95  # success = tracked to (almost) the end without termination
     # interaction_success: a success (above) that also tracked the interaction: at no tracked step did the object's
     # mean surface-point error or the body's mean link error exceed these (m). The terminations (0.5 m, InterMimic)
