@@ -43,6 +43,10 @@ def register(subparsers) -> None:
     p.add_argument("--set", dest="overrides", action="append", default=[],
                    help="override, e.g. --set env.num_envs=128 --set ppo.actor_lr=1e-4 (repeatable)")
     p.add_argument("--resume", action="store_true", help="continue each group from its latest checkpoint")
+    p.add_argument("--init", default=None, metavar="CHECKPOINT",
+                   help="start each teacher from this policy's weights and normalisers (e.g. a base policy or "
+                        "another clip's teacher; same observation layout), with fresh optimiser and counters; "
+                        "ignored where a group resumes")
     p.add_argument("--backend", default=None, choices=["auto", "cpu", "warp"],
                    help="physics: cpu (mujoco.rollout), warp (MuJoCo Warp; a GPU, or warp's CPU device) or auto "
                         "(warp when a CUDA device is present); default: the task config's (auto) for teachers, "
@@ -150,7 +154,7 @@ def run(args: argparse.Namespace) -> int:
     jobs = [TeacherJob(group=name, sources=[sources[i] for i in members], run_dir=str(out / name),
                        embodiment=embodiment.name, env_cfg=env_cfg, train_cfg=train_cfg, budget=per_group,
                        run_token=token, device=args.device, torch_threads=max(args.torch_threads, 1),
-                       resume=args.resume, eval_episodes=args.eval_episodes,
+                       resume=args.resume, init=args.init, eval_episodes=args.eval_episodes,
                        preempt_marker_dir=os.environ.get(PREEMPT_HOOK_ENV) or None, clip_options=options)
             for name, members in groups.items()]
     group_clips = [[clips[i] for i in members] for members in groups.values()]

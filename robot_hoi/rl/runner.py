@@ -358,6 +358,14 @@ class OnPolicyRunner:
             self.alg.load_optimizer_state(data["optimizer"])
         return data
 
+    def initialise_from(self, path: str | Path) -> None:
+        """Start from another run's policy (weights and normalisers only): its observation layout must be ours,
+        else the same sizes would feed the wrong numbers to the wrong inputs."""
+        data = self.load(path)
+        theirs, ours = data.get("obs_layout"), self.obs_layout()
+        if theirs != ours:
+            raise UserError(f"{path}: its observation layout {theirs} is not this run's {ours}")
+
     def resume(self, path: str | Path) -> None:
         """Continue a run: weights, normalisers, optimisers, iteration/sample counters and the torch RNG."""
         data = self.load(path, load_optimizer=True)

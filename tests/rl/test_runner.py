@@ -63,6 +63,24 @@ def test_runner_learns_reach_task():
         assert name in memory.scalars, name
 
 
+def test_initialise_from_takes_weights_and_normalisers_but_not_counters(tmp_path):
+    runner, _ = _runner(tmp_path / "base")
+    runner.learn(Budget(iterations=3))
+    ckpt = runner.save(tmp_path / "base" / "model_3.pt")
+    fresh, _ = _runner(tmp_path / "clip", seed=1)
+    fresh.initialise_from(ckpt)
+    for (name, a), (_, b) in zip(runner.model.state_dict().items(), fresh.model.state_dict().items(), strict=True):
+        assert torch.equal(a, b), name
+    assert fresh.iteration == 0 and fresh.total_samples == 0  # a new run: its own budget, schedule and curriculum
+    assert not fresh.alg.actor_optimizer.state_dict()["state"]
+    # a checkpoint of another observation layout with the same sizes is refused
+    data = read_checkpoint(ckpt)
+    data["obs_layout"]["actor_groups"] = ["student"]
+    torch.save(data, tmp_path / "other.pt")
+    with pytest.raises(UserError, match="observation layout"):
+        fresh.initialise_from(tmp_path / "other.pt")
+
+
 def test_checkpoint_resume_restores_everything_and_continues(tmp_path):
     runner, _ = _runner(tmp_path / "a", ["runner.save_interval=2", "runner.keep_last=2"])
     runner.learn(Budget(iterations=5))
