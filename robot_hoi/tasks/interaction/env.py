@@ -22,7 +22,7 @@ from robot_hoi.tasks.interaction.mdp import observations as obs_terms
 from robot_hoi.tasks.interaction.mdp import rewards as reward_terms
 from robot_hoi.tasks.interaction.mdp import terminations as term_terms
 from robot_hoi.tasks.interaction.psi import PsiBuffer
-from robot_hoi.tasks.interaction.reference import ReferenceMotion, nearest_surface_vectors
+from robot_hoi.tasks.interaction.reference import ReferenceMotion, nearest_surface_vectors, object_points_world
 from robot_hoi.tasks.interaction.scene_setup import InteractionScene
 from robot_hoi.utils.timing import OFF
 from robot_hoi.utils.torch_rot import quat_apply, quat_apply_inverse, quat_mul, quat_to_matrix, yaw_quat
@@ -144,7 +144,7 @@ class InteractionEnv:
         self.clip_end = self.clip_start + lengths - 1
         self.object_points = _subsample(references[0].object_points, self.cfg.object_surface_points).to(self.device)
         # d_hat from the same surface samples the simulation's d uses (else |d_hat - d| > 0 on the reference itself)
-        ref_points_world = self.object_points @ self.ref_object_rotmat.transpose(-1, -2) + self.ref_object_pos[:, None]
+        ref_points_world = object_points_world(self.object_points, self.ref_object_pos, self.ref_object_rotmat)
         self.ref_d_hat = nearest_surface_vectors(self.ref_link_pos, ref_points_world)
         wrists = [self.layout.link_names.index(n) for n in ("left_wrist_yaw_link", "right_wrist_yaw_link")]
         self.ref_hand_distance = self.ref_d_hat[:, wrists].norm(dim=-1)
@@ -296,13 +296,11 @@ class InteractionEnv:
         s.hand_contact_found = s.contact_found[:, self.scene.hand_contact_ids]
         s.finger_contact_found = s.contact_found[:, self.scene.finger_contact_ids]
 
-        # surface samples in world: p R^T + o (row vectors)
-        s.object_points_world = self.object_points @ s.object_rotmat.transpose(-1, -2) + s.object_pos[:, None]
+        s.object_points_world = object_points_world(self.object_points, s.object_pos, s.object_rotmat)
         s.d = nearest_surface_vectors(s.link_pos, s.object_points_world)
         s.ref = reference_frame(self, ref_index)
         s.ref_heading_matrix = quat_to_matrix(yaw_quat(s.ref.root_quat_wxyz))
-        s.ref_object_points_world = self.object_points @ s.ref.object_rotmat.transpose(-1, -2) + \
-            s.ref.object_pos[:, None]
+        s.ref_object_points_world = object_points_world(self.object_points, s.ref.object_pos, s.ref.object_rotmat)
         s.w_d = termination.interaction_weights(s.d, s.ref.d_hat)
 
     def _update_history(self) -> None:
