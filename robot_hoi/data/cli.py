@@ -11,7 +11,7 @@ import sys
 
 from robot_hoi.data.cli_options import add_clip_options
 
-KINDS = ("lift_carry", "push", "lift_place")  # robot_hoi.data.synth.KINDS (not imported: keeps --help light)
+KINDS = ("lift_carry", "push", "lift_place", "walk", "carry", "squat")  # robot_hoi.data.synth.KINDS (not imported: keeps --help light)
 ARTIFACTS = ("noise", "floating_contact", "penetration", "missing_frames", "dropped_frames")
 
 
@@ -93,9 +93,9 @@ def _view(args: argparse.Namespace) -> int:
     from robot_hoi.data.view import render_view
 
     if args.clip.startswith("embedded:"):
-        from robot_hoi.data.synth import default_clip
+        from robot_hoi.data.synth import embedded_clip
 
-        clip = default_clip(args.clip.split(":", 1)[1])
+        clip = embedded_clip(args.clip.split(":", 1)[1])
     else:
         clip = _load(args)
     path = render_view(clip, args.output, embodiment=args.embodiment or None, keyframes=args.keyframes,

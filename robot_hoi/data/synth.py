@@ -3,6 +3,13 @@ carry it ~2 m, put it down (`lift_carry`), push it ~1.2 m along the floor (`push
 tall light box in front of the feet, lift it, hold it and put it back (`lift_place`: the first clip a teacher
 completes on a CPU budget, since it needs balance but no walking).
 
+The base-motion kinds, for a policy that already walks before it learns a clip's interaction: `walk` (stand, walk
+1-2.5 m at a seeded pace, stop; the box lies 1 m beside the path, untouched), `carry` (the box at the feet: squat,
+lift, carry it 1-2 m, put it down: lift_carry without the walk-up) and `squat` (squat down and up twice, hands
+free). Seeds vary the distance, heading and start, and
+seeds 0-3 (mod 4) set four paces from 0.8 to 0.4 m/s (squats: depth and tempo); `BASE_MOTIONS` lists the library
+(`embedded:base` as a training source).
+
 Deterministic for a seed and fast (~0.3 s). The human is the template adult (template_skeleton.py, ~1.75 m),
 posed by IK, so body_pos is forward kinematics of body_quat, dof_rotvec are the relative rotations, planted
 feet stay put, and the box follows the palms while held. Contact labels follow the stored labels' rule
@@ -36,7 +43,10 @@ from robot_hoi.data.template_skeleton import (
 )
 from robot_hoi.errors import UserError
 
-KINDS = ("lift_carry", "push", "lift_place")
+KINDS = ("lift_carry", "push", "lift_place", "walk", "carry", "squat")
+# The base-motion library: one object (the 5 kg box), straight walks at four paces, three carries, two squat sets.
+BASE_MOTIONS = (("walk", 0), ("walk", 1), ("walk", 2), ("walk", 3), ("carry", 0), ("carry", 1), ("carry", 2),
+                ("squat", 0), ("squat", 1))
 ARTIFACTS = ("noise", "floating_contact", "penetration", "missing_frames", "dropped_frames")
 FPS = 30.0
 BOX_SIZE_M = (0.4, 0.4, 0.3)
@@ -76,6 +86,8 @@ PREGRASP_GAP = 0.08  # palms this far out from the box faces before closing in
 ARTIFACT_GAP = {"floating_contact": 0.04, "penetration": -0.03}
 NOISE_POS_M = 0.01
 NOISE_ROT_RAD = 0.02
+BOX_ASIDE_M = 1.0  # walk / squat: the box lies this far left of the path
+PACE_RANGE = (1.0, 1.6)  # x STEP's step time, / its step length: 0.8 .. 0.4 m/s
 
 
 @dataclass(frozen=True)
@@ -83,16 +95,27 @@ class Scene:
     """Seeded variations of the script."""
 
     box_distance: float  # start pelvis x to the box centre, m
-    travel: float  # carry / push distance, m
+    travel: float  # carry / push / walk distance, m
     heading: float  # yaw of the whole scene, rad
     start_xy: tuple[float, float]
+    pace: float = 1.0  # base motions: step time x pace, step length / pace
 
     @classmethod
     def from_seed(cls, seed: int, kind: str) -> Scene:
         rng = np.random.default_rng(seed)
         travel = {"lift_carry": rng.uniform(1.9, 2.1), "push": rng.uniform(1.1, 1.3)}.get(kind, 0.0)
-        return cls(float(rng.uniform(1.45, 1.6)), float(travel), float(rng.uniform(-0.5, 0.5)),
-                   (float(rng.uniform(-0.3, 0.3)), float(rng.uniform(-0.3, 0.3))))  # fmt: skip
+        scene = cls(float(rng.uniform(1.45, 1.6)), float(travel), float(rng.uniform(-0.5, 0.5)),
+                    (float(rng.uniform(-0.3, 0.3)), float(rng.uniform(-0.3, 0.3))))  # fmt: skip
+        if kind in ("walk", "carry", "squat"):  # drawn after the others: the original kinds keep their scenes
+            travel = {"walk": rng.uniform(1.0, 2.5), "carry": rng.uniform(1.0, 2.0)}.get(kind, 0.0)
+            pace = PACE_RANGE[0] + (seed % 4) / 3 * (PACE_RANGE[1] - PACE_RANGE[0])  # seeds 0-3: four paces
+            scene = replace(scene, travel=float(travel), pace=float(pace),
+                            box_distance=GRASP_DISTANCE if kind == "carry" else scene.box_distance)
+        return scene
+
+    @property
+    def step(self) -> dict[str, float]:
+        return dict(STEP, max_step=STEP["max_step"] / self.pace, step_time=STEP["step_time"] * self.pace)
 
 
 @dataclass
@@ -121,10 +144,11 @@ def _depth(pelvis_z: np.ndarray, lowest: float) -> np.ndarray:
 
 def _lift_carry_script(scene: Scene, gap_hold: float) -> Script:
     x_grasp = scene.box_distance - GRASP_DISTANCE
-    walk1 = plan_walk(0.2, 0.0, x_grasp, **STEP)
-    t_squat = walk1.t_end
+    step = scene.step
+    walk_up = [plan_walk(0.2, 0.0, x_grasp, **step)] if x_grasp > 0.05 else []  # carry: the box at the feet
+    t_squat = walk_up[0].t_end if walk_up else 0.5
     t_low, t_grip, t_lift, t_lifted = t_squat + 0.6, t_squat + 0.8, t_squat + 1.1, t_squat + 2.0
-    walk2 = plan_walk(t_lifted + 0.1, x_grasp, x_grasp + scene.travel, first="R", **STEP)
+    walk2 = plan_walk(t_lifted + 0.1, x_grasp, x_grasp + scene.travel, first="R", **step)
     t_down, t_placed = walk2.t_end, walk2.t_end + 0.9
     t_up, t_end = t_placed + 0.3, t_placed + 1.3
     t = np.arange(int(round((t_end + 0.2) * FPS))) / FPS
@@ -142,7 +166,8 @@ def _lift_carry_script(scene: Scene, gap_hold: float) -> Script:
     )
     squat = _depth(pelvis_z, SQUAT_PELVIS_Z)
     pelvis_x = (
-        keyframes(t, walk1.pelvis_keys() + [(t_lifted, x_grasp)] + walk2.pelvis_keys()) - HIPS_BACK * squat
+        keyframes(t, (walk_up[0].pelvis_keys() if walk_up else [(0.0, 0.0)]) + [(t_lifted, x_grasp)]
+                  + walk2.pelvis_keys()) - HIPS_BACK * squat
     )
     lean = ramps(
         t,
@@ -167,7 +192,39 @@ def _lift_carry_script(scene: Scene, gap_hold: float) -> Script:
     grip = ramp(t, t_squat + 0.2, t_grip) * (1 - ramp(t, t_placed + 0.25, t_up + 0.3))
     close = ramp(t, t_grip, t_lift) * (1 - ramp(t, t_placed, t_placed + 0.25))
     gap = PREGRASP_GAP * (1 - close) + gap_hold * close
-    return Script(t, [walk1, walk2], pelvis_x, pelvis_z, lean, squat, box_pos, grip, gap, "sides")
+    return Script(t, walk_up + [walk2], pelvis_x, pelvis_z, lean, squat, box_pos, grip, gap, "sides")
+
+
+def _walk_script(scene: Scene, gap_hold: float) -> Script:
+    """Stand, walk `travel` straight ahead, stop and stand; the box lies beside the path (no contact)."""
+    walk = plan_walk(0.3, 0.0, scene.travel, **scene.step)
+    t_end = walk.t_end + 0.8
+    t = np.arange(int(round(t_end * FPS))) / FPS
+    pelvis_z = ramps(t, STAND_PELVIS_Z, [(0.1, 0.5, WALK_PELVIS_Z), (walk.t_end, walk.t_end + 0.5, STAND_PELVIS_Z)])
+    pelvis_x = keyframes(t, walk.pelvis_keys())
+    return _hands_free(t, [walk], pelvis_x, pelvis_z, np.full_like(t, 0.05), np.zeros_like(t), scene)
+
+
+def _squat_script(scene: Scene, gap_hold: float) -> Script:
+    """Squat down and up twice on the spot (depth and tempo from the pace), hands free."""
+    depth = SQUAT_PELVIS_Z + (CROUCH_PELVIS_Z + 0.15 - SQUAT_PELVIS_Z) * (scene.pace - PACE_RANGE[0]) / np.ptp(PACE_RANGE)
+    down, hold = 0.9 * scene.pace, 0.4
+    moves, lean_moves, t0 = [], [], 0.5
+    for _ in range(2):
+        moves += [(t0, t0 + down, depth), (t0 + down + hold, t0 + 2 * down + hold, STAND_PELVIS_Z)]
+        lean_moves += [(t0, t0 + down, 0.5), (t0 + down + hold, t0 + 2 * down + hold, 0.05)]
+        t0 += 2 * down + hold + 0.4
+    t = np.arange(int(round((t0 + 0.3) * FPS))) / FPS
+    pelvis_z = ramps(t, STAND_PELVIS_Z, moves)
+    squat = _depth(pelvis_z, SQUAT_PELVIS_Z)
+    return _hands_free(t, [], -HIPS_BACK * squat, pelvis_z, ramps(t, 0.05, lean_moves), squat, scene)
+
+
+def _hands_free(t, walks, pelvis_x, pelvis_z, lean, squat, scene: Scene) -> Script:
+    """A script whose hands never go to the box: it rests BOX_ASIDE_M left of the start, mid-way along the path."""
+    rest = np.array([0.5 * scene.travel, BOX_ASIDE_M, BOX_SIZE_M[2] / 2])
+    return Script(t, walks, pelvis_x, pelvis_z, lean, squat, np.tile(rest, (len(t), 1)), np.zeros_like(t),
+                  np.full_like(t, PREGRASP_GAP), "sides")
 
 
 def _push_script(scene: Scene, gap_hold: float) -> Script:
@@ -216,7 +273,8 @@ def _lift_place_script(scene: Scene, gap_hold: float) -> Script:
                   palm_forward=LIFT_PLACE_PALM_FORWARD, turn_lead=LIFT_PLACE_TURN_LEAD)
 
 
-SCRIPTS = {"lift_carry": _lift_carry_script, "push": _push_script, "lift_place": _lift_place_script}
+SCRIPTS = {"lift_carry": _lift_carry_script, "push": _push_script, "lift_place": _lift_place_script,
+           "walk": _walk_script, "carry": _lift_carry_script, "squat": _squat_script}
 
 
 def _box_hand_targets(script: Script, side: str):
@@ -318,8 +376,9 @@ def default_clip(kind: str = "lift_carry", *, seed: int = 0, artifacts=()) -> HO
     body_pos, body_quat, box_pos, box_quat = _place_in_world(scene, body_pos, body_quat, script.box_pos)
     body_quat = make_quaternions_continuous(body_quat)[0]
     tall = kind == "lift_place"
+    # one object, one set of surface samples, whatever the clip's seed (clips of one object share an env)
     box = box_asset(script.box_size, name="tall_box" if tall else "box",
-                    mass_kg=TALL_BOX_MASS_KG if tall else BOX_MASS_KG, seed=seed)
+                    mass_kg=TALL_BOX_MASS_KG if tall else BOX_MASS_KG)
     contact, body_contact = label_contacts(body_pos, box, box_pos, box_quat, FPS)
     clip = HOIClip(
         name=f"synth_{kind}_seed{seed}" + "".join(f"_{a}" for a in artifacts),
@@ -346,6 +405,14 @@ def default_clip(kind: str = "lift_carry", *, seed: int = 0, artifacts=()) -> HO
     estimate = infer_contacts(clip.body_pos, box, clip.object_pos, clip.object_quat_xyzw, FPS)
     clip.inferred_contact, clip.inferred_body_contact = estimate.contact, estimate.body_contact
     return _apply_frame_artifacts(clip, artifacts, np.random.default_rng([seed, 1]))
+
+
+def embedded_clip(spec: str) -> HOIClip:
+    """The clip an `embedded:` source names: "KIND" (seed 0) or "KIND:SEED", e.g. "walk:3"."""
+    kind, _, seed = spec.partition(":")
+    if seed and not seed.isdigit():
+        raise UserError(f"embedded:{spec}: the seed after the kind must be a whole number (e.g. embedded:{kind}:3)")
+    return default_clip(kind, seed=int(seed or 0))
 
 
 def _apply_frame_artifacts(clip: HOIClip, artifacts: tuple[str, ...], rng: np.random.Generator) -> HOIClip:

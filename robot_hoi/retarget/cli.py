@@ -29,6 +29,10 @@ def register(subparsers) -> None:
     p.add_argument("--scale", type=float, help="human->robot scale (default robot_height / subject height)")
     p.add_argument("--anchor-mode", choices=("distance", "contact"), default="distance",
                    help="anchor weights from the distance to the object (default) or from the clip's contact labels")
+    p.add_argument("--leg-loads", action="store_true",
+                   help="offset the leg PD targets by the torques that carry the body on the feet in contact "
+                        "(a crouch holds its pose; walking replays sag ~3x less but do not last longer; off in "
+                        "training)")
     add_clip_options(p, "--objects-dir")  # --objects-dir: the old spelling, kept working
     p.add_argument("--json", action="store_true", help="print the report as JSON on stdout")
     p.set_defaults(func=run)
@@ -59,7 +63,8 @@ def run(args: argparse.Namespace) -> int:
     clip = _load(args)
     model = build_model(cfg)
     options = RetargetOptions()
-    options = replace(options, mapping=replace(options.mapping, anchor_mode=args.anchor_mode))
+    options = replace(options, mapping=replace(options.mapping, anchor_mode=args.anchor_mode),
+                      executable=replace(options.executable, compensate_leg_loads=args.leg_loads))
     result = retarget_clip(clip, cfg, model, scale=args.scale, options=options)
     report = build_report(result)
     report["clip"] = clip.name

@@ -34,6 +34,13 @@ class ExecutableSettings:
     squeeze_depth: float = 0.06       # m the held hands' PD targets go past the surface, toward each other
     squeeze_damping: float = 1e-3     # damped least squares (m^2)
     compensate_loads: bool = True     # PD targets offset by the static gravity / held-object torque over kp
+    # ... for the legs too: the torques that carry the body on the feet in contact with the floor. A crouched G1
+    # then holds its pose (pelvis sag 9 cm -> 0.04 cm; test) and the walk replays (zero residual, pelvis held by
+    # the assist) sag 14-18 cm instead of 47-49, but do not last longer (embedded:walk:0 57 vs 60 frames, walk:3
+    # 58 vs 75: the swing foot lands short and the pelvis drifts sideways), and lift_place's replay ends earlier
+    # (73 vs 86 frames). Off until a walking policy is trained with it; `robot-hoi retarget --leg-loads`.
+    compensate_leg_loads: bool = False
+    support_height: float = 0.015     # m above the lowest sole point: sole points this low carry the body
 
 
 def limit_speed(track: np.ndarray, max_step: float) -> np.ndarray:
@@ -88,9 +95,14 @@ def squeeze_offsets(model: mujoco.MjModel, qpos: np.ndarray, closure: dict[str, 
 
 
 def load_offsets(model: mujoco.MjModel, qpos: np.ndarray, joints: list[str],
-                 carried: dict[str, np.ndarray]) -> np.ndarray:
+                 carried: dict[str, np.ndarray], soles: tuple[np.ndarray, np.ndarray] | None = None,
+                 support_height: float = 0.015) -> np.ndarray:
     """(T, nq) PD-target offsets tau / kp for the position-actuated `joints`: tau holds each pose (qvel 0) against
-    gravity and against the weights `carried` {body: (T,) N, pulling down at that body's origin}."""
+    gravity and against the weights `carried` {body: (T,) N, pulling down at that body's origin}.
+
+    With `soles` (body ids (P,), body-frame points (P, 3): the feet's sole corners) the floor carries the robot:
+    forces at the sole points within `support_height` of the lowest one balance the floating base (least-norm
+    forces), and the joints get the torques that pass that load down to the feet (the legs' share)."""
     data = mujoco.MjData(model)
     offsets = np.zeros_like(qpos)
     ids = joint_ids(model, joints)
@@ -113,5 +125,25 @@ def load_offsets(model: mujoco.MjModel, qpos: np.ndarray, joints: list[str],
             if weight[t] > 0:  # the hand holds the weight up: tau += J^T (0, 0, w)
                 mujoco.mj_jacBody(model, data, jac, None, bodies[name])
                 tau += jac[2] * weight[t]
+        if soles is not None:
+            tau -= _floor_support(model, data, tau, *soles, support_height)
         offsets[t, qadr[driven]] = tau[dofs[driven]] / kp[driven]
     return offsets
+
+
+def _floor_support(model: mujoco.MjModel, data: mujoco.MjData, tau: np.ndarray, sole_body: np.ndarray,
+                   sole_local: np.ndarray, support_height: float) -> np.ndarray:
+    """J^T f (nv,) of the least-norm floor forces f at the supporting sole points that hold the floating base
+    (the free joint's rows of `tau`, the bias the actuators cannot supply) still."""
+    world = data.xpos[sole_body] + np.einsum("pij,pj->pi", data.xmat[sole_body].reshape(-1, 3, 3), sole_local)
+    # a sole point's share fades smoothly with its height above the lowest one (a foot lifting off hands its load
+    # over within support_height instead of dropping it in one frame, which would make the PD targets jump)
+    share = np.clip(1.0 - (world[:, 2] - world[:, 2].min()) / support_height, 0.0, 1.0) ** 2
+    support = np.flatnonzero(share > 1e-3)
+    jacs = np.zeros((len(support), 3, model.nv))
+    for k, i in enumerate(support):
+        mujoco.mj_jac(model, data, jacs[k], None, world[i], int(sole_body[i]))
+    base = jacs[:, :, :6].reshape(-1, 6).T                     # (6, 3S): forces -> base rows
+    weight = np.repeat(share[support], 3)                      # least-norm in the metric 1/share
+    forces = weight * (base.T @ np.linalg.lstsq((base * weight) @ base.T, tau[:6], rcond=None)[0])
+    return jacs.reshape(-1, model.nv).T @ forces

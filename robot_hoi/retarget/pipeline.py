@@ -121,7 +121,9 @@ def retarget_targets(
     limited[:, upper_qadr] = limit_speed(limited[:, upper_qadr], options.executable.max_joint_speed / targets.fps)
     result = solver.evaluate(limited, targets.pos, result.iterations, track)
     squeeze = _squeeze(model, cfg, result.qpos, hold, targets.fps, options)
-    loads = _load_compensation(model, result.qpos, upper, hold, targets, options)
+    loaded = body_joints if options.executable.compensate_leg_loads else upper
+    loads = _load_compensation(model, result.qpos, loaded, hold, targets, options,
+                               (solver.sole_body, solver.sole_local) if len(solver.sole_body) else None)
     seconds = time.perf_counter() - start
 
     act_qadr = model.jnt_qposadr[model.actuator_trnid[:, 0]]
@@ -182,10 +184,12 @@ def _squeeze(model: mujoco.MjModel, cfg, qpos: np.ndarray, hold: dict[str, np.nd
     return squeeze_offsets(model, qpos, ramp, wrists, arms, options.executable)
 
 
-def _load_compensation(model: mujoco.MjModel, qpos: np.ndarray, upper: list[str], hold: dict[str, np.ndarray],
-                       targets: RobotTargets, options: RetargetOptions) -> np.ndarray:
-    """(T, nq) load-compensation offsets for the `upper` (waist and arm) PD targets (executable.py): gravity on the
-    links, and the object's weight (when its mass is known) shared by the holding hands while it is off its rest."""
+def _load_compensation(model: mujoco.MjModel, qpos: np.ndarray, joints: list[str], hold: dict[str, np.ndarray],
+                       targets: RobotTargets, options: RetargetOptions,
+                       soles: tuple[np.ndarray, np.ndarray] | None) -> np.ndarray:
+    """(T, nq) load-compensation offsets for the `joints`' PD targets (executable.py; waist and arms, and the legs
+    with compensate_leg_loads): gravity on the links, and the object's weight (when its mass is known) shared by the
+    holding hands while it is off its rest; with leg loads, carried down to the feet on the floor."""
     if not options.executable.compensate_loads:
         return np.zeros_like(qpos)
     carried = {}
@@ -196,7 +200,9 @@ def _load_compensation(model: mujoco.MjModel, qpos: np.ndarray, upper: list[str]
         for side in hold:
             share = np.where(hold[side], 1.0 / np.maximum(both, 1.0), 0.0)
             carried[f"{side}_wrist_yaw_link"] = lifted * share * targets.object_mass_kg * 9.81
-    return load_offsets(model, qpos, upper, carried)
+    if not options.executable.compensate_leg_loads:
+        soles = None
+    return load_offsets(model, qpos, joints, carried, soles, options.executable.support_height)
 
 
 def robot_hand_lengths(model: mujoco.MjModel, link_map: dict[str, str]) -> dict[str, float]:

@@ -165,3 +165,45 @@ def test_self_penetration_finds_a_hand_pushed_into_the_thigh():
     report = self_penetration(model, np.stack([stand, inward]))
     assert report["self_penetration_cm"] > 1.0 and report["self_penetration_fraction"] == 0.5
     assert any("left" in pair or "pelvis" in pair or "torso" in pair for pair in report["self_penetration_pairs"])
+
+
+def test_leg_load_offsets_carry_a_crouched_robot_on_its_feet():
+    """The G1 crouched (knees 1 rad) on its PD servos: targeting the pose, the pelvis sags 9 cm (the knees yield
+    to the body's weight); with the offsets of the load carried through the soles on the floor, under 1 cm."""
+    import mujoco
+
+    from robot_hoi.data.objects import box_asset
+    from robot_hoi.embodiment import load_embodiment
+    from robot_hoi.retarget.executable import load_offsets
+    from robot_hoi.retarget.ik import sole_points
+    from robot_hoi.tasks.interaction.scene_setup import InteractionScene
+
+    embodiment = load_embodiment("g1_inspire")
+    scene = InteractionScene(embodiment, box_asset((0.4, 0.4, 0.3)))
+    model = scene.model
+    qpos = model.qpos0.copy()
+    qpos[: scene.layout.robot_nq] = scene.default_robot_qpos()[0].double().numpy()
+    qpos[scene.layout.object_qpos:scene.layout.object_qpos + 3] = (3.0, 0.0, 0.15)  # out of the way
+    for side in ("left", "right"):
+        for joint, angle in (("hip_pitch", -0.5), ("knee", 1.0), ("ankle_pitch", -0.5)):
+            qpos[model.jnt_qposadr[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, f"{side}_{joint}_joint")]] = angle
+    feet = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, f"{side}_ankle_roll_link") for side in ("left", "right")]
+    sole_body, sole_local = sole_points(model, qpos, feet)
+    data = mujoco.MjData(model)
+    data.qpos[:] = qpos
+    mujoco.mj_kinematics(model, data)
+    soles = data.xpos[sole_body] + np.einsum("pij,pj->pi", data.xmat[sole_body].reshape(-1, 3, 3), sole_local)
+    qpos[2] -= soles[:, 2].min()  # standing on the floor
+    legs = [n for n in embodiment.actuator_names if any(k in n for k in ("hip", "knee", "ankle"))]
+    targets = model.jnt_qposadr[model.actuator_trnid[:, 0]]
+
+    def sag(offsets):
+        data = mujoco.MjData(model)
+        data.qpos[:] = qpos
+        data.ctrl[:] = qpos[targets] + offsets[targets]
+        for _ in range(int(1.0 / model.opt.timestep)):
+            mujoco.mj_step(model, data)
+        return qpos[2] - data.qpos[2]
+
+    assert sag(np.zeros(model.nq)) > 0.05
+    assert sag(load_offsets(model, qpos[None], legs, {}, (sole_body, sole_local))[0]) < 0.01

@@ -31,6 +31,11 @@ def expand_sources(data: list[str] | None) -> list[str]:
         return [DEFAULT_SOURCE]
     sources: list[str] = []
     for item in data:
+        if item == f"{EMBEDDED_PREFIX}base":  # the base-motion library (robot_hoi.data.synth.BASE_MOTIONS)
+            from robot_hoi.data.synth import BASE_MOTIONS
+
+            sources += [f"{EMBEDDED_PREFIX}{kind}:{seed}" for kind, seed in BASE_MOTIONS]
+            continue
         if item.startswith(EMBEDDED_PREFIX):
             sources.append(item)
             continue
@@ -51,9 +56,9 @@ def load_source(source: str, clip_options: dict | None = None):
     """One clip from a source string (validated by the data layer); clip_options: load_clip keywords
     (robot_hoi.data.cli_options: objects folder, repair)."""
     if source.startswith(EMBEDDED_PREFIX):
-        from robot_hoi.data.synth import default_clip
+        from robot_hoi.data.synth import embedded_clip
 
-        return default_clip(kind=source[len(EMBEDDED_PREFIX):])
+        return embedded_clip(source[len(EMBEDDED_PREFIX):])
     from robot_hoi.data.clip import load_clip
 
     return load_clip(source, **(clip_options or {}))
