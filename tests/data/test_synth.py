@@ -120,3 +120,32 @@ def test_bad_requests_are_user_errors():
         default_clip("push", artifacts=["gravity_off"])
     with pytest.raises(UserError, match="exclude"):
         default_clip("push", artifacts=["floating_contact", "penetration"])
+
+
+def test_base_motion_library_walks_carries_and_squats():
+    from robot_hoi.data.synth import BASE_MOTIONS, embedded_clip
+    from robot_hoi.tasks.interaction.factory import expand_sources
+
+    sources = expand_sources(["embedded:base"])
+    assert sources == [f"embedded:{kind}:{seed}" for kind, seed in BASE_MOTIONS]
+    clips = {s: embedded_clip(s.split(":", 1)[1]) for s in sources}
+    assert len({c.name for c in clips.values()}) == len(clips)
+    # one object: the same box and surface samples in every clip, so they can share one teacher's env
+    assert len({(c.object.name, c.object.sample_points.tobytes()) for c in clips.values()}) == 1
+    speeds = []
+    for source, clip in clips.items():
+        validate_clip(clip, path=source)
+        kind = source.split(":")[1]
+        travel = np.linalg.norm(clip.root_pos[-1, :2] - clip.root_pos[0, :2])
+        if kind == "walk":
+            assert not clip.contact.any() and travel > 0.9  # walks past the box without touching it
+            moving = np.linalg.norm(np.diff(clip.root_pos[:, :2], axis=0), axis=-1) * clip.fps
+            speeds.append(np.percentile(moving, 90))
+        elif kind == "carry":
+            assert clip.contact.any() and travel > 0.9
+            assert np.ptp(clip.root_pos[: int(0.5 * clip.fps), 0]) < 0.02  # no walk-up: the box is at the feet
+        else:
+            assert not clip.contact.any() and travel < 0.02 and clip.root_pos[:, 2].min() < 0.6
+    assert max(speeds) > 1.5 * min(speeds)  # the walks cover several paces
+    with pytest.raises(UserError, match="whole number"):
+        embedded_clip("walk:two")
