@@ -87,8 +87,15 @@ class MujocoWarpBackend(PhysicsBackend):
             setattr(self._m, name, wp.array(rows, dtype=field.dtype))
         self._mass_views = {name: wp.to_torch(getattr(self._m, name)) for name in self._MASS_FIELDS}
         self._mass_variants: dict[tuple[int, float], dict[str, Tensor]] = {}
+        self._varied_body: int | None = None
 
     def set_body_mass(self, env_ids: Tensor, body_id: int, mass: Tensor) -> None:
+        """Whole rows of the base model's variant are written, so one body per backend (as on the CPU). Reads the
+        masses back to the host once per call (the variants are built there): with randomisation on, a GPU run pays
+        one sync per reset step."""
+        if self._varied_body not in (None, body_id):
+            raise ValueError(f"body {self._varied_body} already has per-world masses; one body per backend")
+        self._varied_body = body_id
         ids = env_ids.to(self.device)
         rows = []
         for kg in mass.detach().double().cpu().tolist():  # resets only; a few distinct masses (see the CPU backend)
