@@ -53,10 +53,15 @@ class PhysicsBackend(ABC):
         """Overwrite the state of `env_ids` and recompute their sensors."""
 
     @abstractmethod
-    def set_body_mass(self, env_ids: Tensor, body_id: int, mass: Tensor) -> None:
-        """Give body `body_id` of the environments `env_ids` the masses `mass` (kg; inertia scaled alike, derived
-        constants recomputed: sim.scene.with_body_mass). One body per backend is varied this way; the rest of every
-        environment's model stays the backend's `model`. Takes effect from the next step."""
+    def set_body_mass_levels(self, body_id: int, masses: list[float]) -> None:
+        """Prepare the masses (kg) body `body_id` may take (inertia scaled alike, derived constants recomputed:
+        sim.scene.with_body_mass); every environment starts at the model's own. Once, before `select_body_mass`;
+        one body per backend."""
+
+    @abstractmethod
+    def select_body_mass(self, env_ids: Tensor, levels: Tensor) -> None:
+        """Give the environments `env_ids` the prepared masses `levels` (indices into set_body_mass_levels'
+        list), from their next step. No host sync where the physics runs on a GPU."""
 
     @property
     @abstractmethod

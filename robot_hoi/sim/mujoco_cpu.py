@@ -50,8 +50,7 @@ class MujocoCpuBackend(PhysicsBackend):
         self._kin_model = _zero_timestep_copy(model)
         self._models = [model] * num_envs  # rollout's fast path takes one model per environment
         self._kin_models = [self._kin_model] * num_envs
-        self._mass_variants: dict[tuple[int, float], tuple[mujoco.MjModel, mujoco.MjModel]] = {}
-        self._varied_body: int | None = None
+        self._mass_levels: list[tuple[mujoco.MjModel, mujoco.MjModel]] = []  # set_body_mass_levels
 
         self.nstate = mujoco.mj_stateSize(model, _STATE_SPEC)
         self._qpos_slice = _state_slice(model, mujoco.mjtState.mjSTATE_QPOS)
@@ -123,18 +122,14 @@ class MujocoCpuBackend(PhysicsBackend):
         )
         self._sensordata[ids] = sens_out[:, 0]
 
-    def set_body_mass(self, env_ids: Tensor, body_id: int, mass: Tensor) -> None:
-        """Each distinct mass is one model copy (with its zero-timestep twin), shared by every env that has it:
-        callers keep the number of distinct masses small (the interaction env draws them on a 2 % grid)."""
-        if self._varied_body not in (None, body_id):
-            raise ValueError(f"body {self._varied_body} already has per-env masses; one body per backend")
-        self._varied_body = body_id
-        for i, kg in zip(env_ids.tolist(), mass.detach().double().cpu().tolist(), strict=True):  # resets only
-            key = (body_id, round(kg, 9))
-            if key not in self._mass_variants:
-                variant = with_body_mass(self.model, body_id, kg)
-                self._mass_variants[key] = (variant, _zero_timestep_copy(variant))
-            self._models[i], self._kin_models[i] = self._mass_variants[key]
+    def set_body_mass_levels(self, body_id: int, masses: list[float]) -> None:
+        """One model copy (and its zero-timestep twin) per mass, shared by the envs that have it."""
+        self._mass_levels = [(variant, _zero_timestep_copy(variant))
+                             for variant in (with_body_mass(self.model, body_id, float(kg)) for kg in masses)]
+
+    def select_body_mass(self, env_ids: Tensor, levels: Tensor) -> None:
+        for i, level in zip(env_ids.tolist(), levels.tolist(), strict=True):  # resets only
+            self._models[i], self._kin_models[i] = self._mass_levels[level]
 
     # ---- views ------------------------------------------------------------------------------------------------
     @property

@@ -75,7 +75,7 @@ class MujocoWarpBackend(PhysicsBackend):
         self._step_graph = self._forward_graph = None
         self.stepping = self._capture_graphs()
 
-    # Per-world mass properties (set_body_mass): MJWarp reads a field with a leading world axis per world.
+    # Per-world mass properties (select_body_mass): MJWarp reads a field with a leading world axis per world.
     _MASS_FIELDS = ("body_mass", "body_subtreemass", "body_inertia", "body_invweight0")
 
     def _batch_mass_fields(self, model: mujoco.MjModel, num_envs: int) -> None:
@@ -86,27 +86,18 @@ class MujocoWarpBackend(PhysicsBackend):
             rows = np.repeat(np.asarray(getattr(model, name), dtype=np.float32)[None], num_envs, axis=0)
             setattr(self._m, name, wp.array(rows, dtype=field.dtype))
         self._mass_views = {name: wp.to_torch(getattr(self._m, name)) for name in self._MASS_FIELDS}
-        self._mass_variants: dict[tuple[int, float], dict[str, Tensor]] = {}
-        self._varied_body: int | None = None
+        self._mass_levels: dict[str, Tensor] = {}  # set_body_mass_levels
 
-    def set_body_mass(self, env_ids: Tensor, body_id: int, mass: Tensor) -> None:
-        """Whole rows of the base model's variant are written, so one body per backend (as on the CPU). Reads the
-        masses back to the host once per call (the variants are built there): with randomisation on, a GPU run pays
-        one sync per reset step."""
-        if self._varied_body not in (None, body_id):
-            raise ValueError(f"body {self._varied_body} already has per-world masses; one body per backend")
-        self._varied_body = body_id
-        ids = env_ids.to(self.device)
-        rows = []
-        for kg in mass.detach().double().cpu().tolist():  # resets only; a few distinct masses (see the CPU backend)
-            key = (body_id, round(kg, 9))
-            if key not in self._mass_variants:
-                variant = with_body_mass(self.model, body_id, kg)
-                self._mass_variants[key] = {name: torch.as_tensor(getattr(variant, name), dtype=torch.float32,
-                                                                  device=self.device) for name in self._MASS_FIELDS}
-            rows.append(self._mass_variants[key])
+    def set_body_mass_levels(self, body_id: int, masses: list[float]) -> None:
+        """Each field's rows for every mass, on the device (selecting is then a device gather)."""
+        variants = [with_body_mass(self.model, body_id, float(kg)) for kg in masses]
+        self._mass_levels = {name: torch.stack([torch.as_tensor(getattr(v, name), dtype=torch.float32)
+                                                for v in variants]).to(self.device) for name in self._MASS_FIELDS}
+
+    def select_body_mass(self, env_ids: Tensor, levels: Tensor) -> None:
+        ids, levels = env_ids.to(self.device), levels.to(self.device)
         for name, view in self._mass_views.items():
-            view[ids] = torch.stack([r[name] for r in rows]).reshape(view[ids].shape)
+            view[ids] = self._mass_levels[name][levels].reshape(view[ids].shape)
 
     # ---- CUDA graphs ------------------------------------------------------------------------------------------
     def _capture_graphs(self) -> str:

@@ -42,7 +42,8 @@ def test_each_env_steps_with_its_own_mass(name):
     model = mujoco.MjModel.from_xml_string(XML)
     base = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, "base")
     backend = make_backend(name, model, num_envs=3, decimation=4, device="cpu" if name == "warp" else None)
-    backend.set_body_mass(torch.tensor([1]), base, torch.tensor([2.0], dtype=torch.float64))
+    backend.set_body_mass_levels(base, [1.0, 2.0])
+    backend.select_body_mass(torch.tensor([1]), torch.tensor([1]))
     backend.set_state(torch.arange(3), torch.as_tensor(model.qpos0).repeat(3, 1), torch.zeros(3, model.nv))
     wrench = torch.zeros(3, model.nbody, 6)
     wrench[:, base, 2] = 1.5 * 1.3 * 9.81
@@ -53,7 +54,7 @@ def test_each_env_steps_with_its_own_mass(name):
     assert z[1] < 0.5 - 0.02                        # heavy: falls
     assert torch.allclose(z[0], z[2], atol=1e-6)    # the untouched envs keep the model's mass
     # back to the model's mass: env 1 now rises like the others
-    backend.set_body_mass(torch.tensor([1]), base, torch.tensor([1.0], dtype=torch.float64))
+    backend.select_body_mass(torch.tensor([1]), torch.tensor([0]))
     backend.set_state(torch.arange(3), torch.as_tensor(model.qpos0).repeat(3, 1), torch.zeros(3, model.nv))
     for _ in range(10):
         backend.step(torch.zeros(3, 1), wrench)

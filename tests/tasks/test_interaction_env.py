@@ -114,10 +114,11 @@ def test_object_mass_randomisation_draws_per_episode_masses_the_physics_uses(sce
     env = make_env(scene)
     assert torch.equal(env.object_mass, torch.full((8,), base))  # off by default: the clip's mass
     env = make_env(scene, randomization=RandomizationCfg(object_mass_scale=(0.5, 2.0)))
+    levels = env.object_mass_levels / base  # a 2 % geometric grid from x0.5 to x2: few distinct physics models
+    assert levels[0] == pytest.approx(0.5) and levels[-1] == pytest.approx(2.0) and 65 <= len(levels) <= 73
+    assert torch.allclose(levels[2:-1] / levels[1:-2], torch.tensor(1.02), atol=1e-5)
     masses = env.object_mass / base
-    assert masses.min() >= 0.5 - 1e-6 and masses.max() <= 2.0 + 1e-6 and masses.unique().numel() > 3
-    grid = torch.log(masses.double()) / torch.log(torch.tensor(1.02, dtype=torch.float64))
-    assert torch.allclose(grid, grid.round(), atol=1e-4)  # a 2 % grid: few distinct physics models
+    assert masses.unique().numel() > 3 and all(torch.isclose(levels, m).any() for m in masses)
     # the physics steps each env with its drawn mass
     models = env.backend._models
     assert [float(m.body_mass[body]) for m in models] == pytest.approx(env.object_mass.tolist(), rel=1e-6)
@@ -125,5 +126,6 @@ def test_object_mass_randomisation_draws_per_episode_masses_the_physics_uses(sce
     # an eval at one fixed scale
     env = make_env(scene, randomization=RandomizationCfg(object_mass_scale=(2.0, 2.0)))
     assert torch.allclose(env.object_mass, torch.full((8,), 2 * base))
+    assert [float(m.body_mass[body]) for m in env.backend._models] == pytest.approx([2 * base] * 8)
     with pytest.raises(UserError, match="object_mass_scale"):
         make_env(scene, randomization=RandomizationCfg(object_mass_scale=(2.0, 1.0)))

@@ -97,11 +97,11 @@ class InteractionEnv:
         self.reward_scales = {n: t.scale for n, t in cfg.rewards.items() if t is not None}
         if cfg.reward_mode not in ("product", "sum"):
             raise UserError(f"env.reward_mode must be 'product' or 'sum', not {cfg.reward_mode!r}")
-        lo, hi = cfg.randomization.object_mass_scale
-        if not 0 < lo <= hi:
-            raise UserError(f"env.randomization.object_mass_scale must be 0 < low <= high, not {[lo, hi]}")
-        self._object_log_scale_range = (math.log(lo), math.log(hi))
         self.object_mass = torch.full((cfg.num_envs,), scene.object_mass, device=self.device)  # kg, per env
+        self.object_mass_levels = object_mass_levels(scene.object_mass, cfg.randomization.object_mass_scale)
+        if self.object_mass_levels is not None:
+            self.backend.set_body_mass_levels(scene.object_body_id(), self.object_mass_levels.tolist())
+            self.object_mass_levels = self.object_mass_levels.to(self.device)
         self.assist_level = assist_terms.assist_level(cfg.assist, 0)
         self.feet_link_mask = torch.zeros(layout.num_links, device=self.device)
         self.feet_link_mask[scene.feet_link_ids] = 1.0
@@ -419,8 +419,10 @@ class InteractionEnv:
         self.episode_length[env_ids] = 0
         self.assisted[env_ids] = (torch.rand(n, generator=self.generator, device=self.device)
                                   < self.cfg.assist.assisted_share).float()
-        if self._object_log_scale_range != (0.0, 0.0):
-            self._draw_object_mass(env_ids)
+        if self.object_mass_levels is not None:  # a grid level per episode: log-uniform masses
+            levels = torch.randint(len(self.object_mass_levels), (n,), generator=self.generator, device=self.device)
+            self.object_mass[env_ids] = self.object_mass_levels[levels]
+            self.backend.select_body_mass(env_ids, levels)
         self.tracked_steps[env_ids] = 0
         self.start_frame[env_ids] = frame
         self.contact_loss_frames[env_ids] = 0
@@ -435,15 +437,6 @@ class InteractionEnv:
         self.prev_link_vel[env_ids] = self.link_vel[env_ids]
         self.prev_object_vel[env_ids] = self.object_lin_vel[env_ids]
         self.psi.on_reset(env_ids)
-
-    def _draw_object_mass(self, env_ids: Tensor) -> None:
-        """Object mass x a log-uniform scale on a 2 % grid (a few distinct models for the CPU backend to share)."""
-        lo, hi = self._object_log_scale_range
-        step = math.log(1.02)
-        log_scale = lo + (hi - lo) * torch.rand(env_ids.numel(), generator=self.generator, device=self.device)
-        log_scale = ((log_scale / step).round() * step).clamp(lo, hi)
-        self.object_mass[env_ids] = self.scene.object_mass * log_scale.exp()
-        self.backend.set_body_mass(env_ids, self.scene.object_body_id(), self.object_mass[env_ids])
 
     def _random_frames(self, clip: Tensor) -> Tensor:
         lo, hi = self.cfg.init.start_range
@@ -519,6 +512,19 @@ def reference_frame(ref, idx: Tensor) -> ReferenceFrame:
         joint_pos=ref.ref_joint_pos[idx], link_rotmat=ref.ref_link_rotmat[idx],
         object_rotmat=ref.ref_object_rotmat[idx], root_rotmat=ref.ref_root_rotmat[idx],
     )
+
+
+def object_mass_levels(mass: float, scale: tuple[float, float], step: float = 1.02) -> Tensor | None:
+    """The masses (kg) an episode's object may have: `mass` x the scales of a geometric grid (`step` apart) over
+    [low, high], the ends included; None when the range is (1, 1) (no randomisation)."""
+    lo, hi = scale
+    if not 0 < lo <= hi:
+        raise UserError(f"env.randomization.object_mass_scale must be 0 < low <= high, not {[lo, hi]}")
+    if lo == hi == 1.0:
+        return None
+    grid = torch.arange(math.floor(math.log(lo, step)), math.ceil(math.log(hi, step)) + 1, dtype=torch.float64)
+    scales = torch.unique(torch.pow(step, grid).clamp(lo, hi))
+    return (mass * scales).to(torch.float32)
 
 
 def _subsample(points: Tensor, count: int) -> Tensor:
