@@ -4,9 +4,9 @@ tall light box in front of the feet, lift it, hold it and put it back (`lift_pla
 completes on a CPU budget, since it needs balance but no walking).
 
 The base-motion kinds, for a policy that already walks before it learns a clip's interaction: `walk` (stand, walk
-1-2.5 m at a seeded pace, stop; the box lies 1 m beside the path, untouched), `carry` (the box at the feet: squat,
-lift, carry it 1-2 m, put it down: lift_carry without the walk-up) and `squat` (squat down and up twice, hands
-free). Seeds vary the distance, heading and start, and
+1-2.5 m at a seeded pace, stop; the box lies 1 m beside the path, untouched), `turn` (the same walk bending into a
+45 or 90 degree arc, left or right), `carry` (the box at the feet: squat, lift, carry it 1-2 m, put it down:
+lift_carry without the walk-up) and `squat` (squat down and up twice, hands free). Seeds vary the distance, heading and start, and
 seeds 0-3 (mod 4) set four paces from 0.8 to 0.4 m/s (squats: depth and tempo); `BASE_MOTIONS` lists the library
 (`embedded:base` as a training source).
 
@@ -43,10 +43,11 @@ from robot_hoi.data.template_skeleton import (
 )
 from robot_hoi.errors import UserError
 
-KINDS = ("lift_carry", "push", "lift_place", "walk", "carry", "squat")
-# The base-motion library: one object (the 5 kg box), straight walks at four paces, three carries, two squat sets.
-BASE_MOTIONS = (("walk", 0), ("walk", 1), ("walk", 2), ("walk", 3), ("carry", 0), ("carry", 1), ("carry", 2),
-                ("squat", 0), ("squat", 1))
+KINDS = ("lift_carry", "push", "lift_place", "walk", "carry", "squat", "turn")
+# The base-motion library: one object (the 5 kg box), straight walks at four paces, four turning walks (left and
+# right, 45 and 90 degrees), three carries, two squat sets.
+BASE_MOTIONS = (("walk", 0), ("walk", 1), ("walk", 2), ("walk", 3), ("turn", 0), ("turn", 1), ("turn", 2), ("turn", 3),
+                ("carry", 0), ("carry", 1), ("carry", 2), ("squat", 0), ("squat", 1))
 ARTIFACTS = ("noise", "floating_contact", "penetration", "missing_frames", "dropped_frames")
 FPS = 30.0
 BOX_SIZE_M = (0.4, 0.4, 0.3)
@@ -99,6 +100,7 @@ class Scene:
     heading: float  # yaw of the whole scene, rad
     start_xy: tuple[float, float]
     pace: float = 1.0  # base motions: step time x pace, step length / pace
+    seed_index: int = 0  # base motions: what the seed picks deterministically (pace, turn direction and angle)
 
     @classmethod
     def from_seed(cls, seed: int, kind: str) -> Scene:
@@ -106,11 +108,13 @@ class Scene:
         travel = {"lift_carry": rng.uniform(1.9, 2.1), "push": rng.uniform(1.1, 1.3)}.get(kind, 0.0)
         scene = cls(float(rng.uniform(1.45, 1.6)), float(travel), float(rng.uniform(-0.5, 0.5)),
                     (float(rng.uniform(-0.3, 0.3)), float(rng.uniform(-0.3, 0.3))))  # fmt: skip
-        if kind in ("walk", "carry", "squat"):  # drawn after the others: the original kinds keep their scenes
-            travel = {"walk": rng.uniform(1.0, 2.5), "carry": rng.uniform(1.0, 2.0)}.get(kind, 0.0)
+        if kind in ("walk", "carry", "squat", "turn"):  # drawn after the others: the original kinds keep their scenes
+            travel = {"walk": rng.uniform(1.0, 2.5), "carry": rng.uniform(1.0, 2.0),
+                      "turn": rng.uniform(1.5, 2.5)}.get(kind, 0.0)
             pace = PACE_RANGE[0] + (seed % 4) / 3 * (PACE_RANGE[1] - PACE_RANGE[0])  # seeds 0-3: four paces
             scene = replace(scene, travel=float(travel), pace=float(pace),
-                            box_distance=GRASP_DISTANCE if kind == "carry" else scene.box_distance)
+                            box_distance=GRASP_DISTANCE if kind == "carry" else scene.box_distance,
+                            seed_index=seed)
         return scene
 
     @property
@@ -136,6 +140,21 @@ class Script:
     palm_height: float = 0.08  # palm centres above the box centre in a side hold (m)
     palm_forward: float = -0.03  # palm centres ahead of the box centre in a side hold (m)
     turn_lead: float = 1.0  # the hands turn to their grip orientation this many times faster than they move in
+    # A curved path: the scene's x stations bend into an arc of this signed radius (m, + turns left) from
+    # turn_from (m) on; None keeps the path straight along +x.
+    turn_radius: float | None = None
+    turn_from: float = 0.0
+
+    def path(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Where station `x` lies on the path: (xy (N, 2), heading (N,) rad)."""
+        x = np.asarray(x, dtype=np.float64)
+        if self.turn_radius is None:
+            return np.stack([x, np.zeros_like(x)], axis=-1), np.zeros_like(x)
+        arc = np.clip(x - self.turn_from, 0.0, None)
+        heading = arc / self.turn_radius
+        xy = np.stack([np.minimum(x, self.turn_from) + self.turn_radius * np.sin(heading),
+                       self.turn_radius * (1.0 - np.cos(heading))], axis=-1)
+        return xy, heading
 
 
 def _depth(pelvis_z: np.ndarray, lowest: float) -> np.ndarray:
@@ -203,6 +222,16 @@ def _walk_script(scene: Scene, gap_hold: float) -> Script:
     pelvis_z = ramps(t, STAND_PELVIS_Z, [(0.1, 0.5, WALK_PELVIS_Z), (walk.t_end, walk.t_end + 0.5, STAND_PELVIS_Z)])
     pelvis_x = keyframes(t, walk.pelvis_keys())
     return _hands_free(t, [walk], pelvis_x, pelvis_z, np.full_like(t, 0.05), np.zeros_like(t), scene)
+
+
+def _turn_script(scene: Scene, gap_hold: float) -> Script:
+    """A walk that bends into an arc after 0.2 m: seeds 0-3 (mod 4) turn left 45, right 45, left 90 and right 90
+    degrees; the box lies outside the turn."""
+    script = _walk_script(scene, gap_hold)
+    angle = np.radians(45.0 + 45.0 * ((scene.seed_index // 2) % 2)) * (1.0 if scene.seed_index % 2 == 0 else -1.0)
+    script.turn_radius, script.turn_from = (scene.travel - 0.2) / angle, 0.2
+    script.box_pos[:, 1] = -np.sign(angle) * BOX_ASIDE_M
+    return script
 
 
 def _squat_script(scene: Scene, gap_hold: float) -> Script:
@@ -274,7 +303,7 @@ def _lift_place_script(scene: Scene, gap_hold: float) -> Script:
 
 
 SCRIPTS = {"lift_carry": _lift_carry_script, "push": _push_script, "lift_place": _lift_place_script,
-           "walk": _walk_script, "carry": _lift_carry_script, "squat": _squat_script}
+           "walk": _walk_script, "carry": _lift_carry_script, "squat": _squat_script, "turn": _turn_script}
 
 
 def _box_hand_targets(script: Script, side: str):
@@ -298,9 +327,12 @@ def _box_hand_targets(script: Script, side: str):
 def _pose(script: Script, offsets: np.ndarray) -> tuple[np.ndarray, np.ndarray, dict]:
     t = script.t
     feet = foot_tracks(t, script.walks, 0.0, lift=0.08)
-    root = np.stack([script.pelvis_x, np.zeros_like(t), script.pelvis_z], axis=1)
+    turning = script.turn_radius is not None
+    root_xy, heading = script.path(script.pelvis_x)
+    face = yaw(heading)  # the body's heading on the path (identity on a straight one)
+    root = np.stack([root_xy[:, 0], root_xy[:, 1], script.pelvis_z], axis=1)
     pose = PoseBuilder(offsets, root)
-    pose.set_global(0, pitch(PELVIS_SHARE * script.lean))
+    pose.set_global(0, face * pitch(PELVIS_SHARE * script.lean) if turning else pitch(PELVIS_SHARE * script.lean))
     for name in ("Torso", "Spine", "Chest"):
         pose.set_local(BODY_INDEX[name], pitch((1 - PELVIS_SHARE) * script.lean / 3))
     pose.set_local(BODY_INDEX["Neck"], pitch(-0.3 * script.lean))
@@ -314,23 +346,36 @@ def _pose(script: Script, offsets: np.ndarray) -> tuple[np.ndarray, np.ndarray, 
         knee_pole = np.stack(
             [np.ones_like(t), sign * (0.1 + KNEE_SPREAD * script.squat), np.zeros_like(t)], 1
         )
+        foot_face = Rotation.identity(len(t))  # feet flat, facing +x
+        if turning:  # the foot's station on the arc, its offsets turned with the path there
+            station_xy, foot_heading = script.path(x)
+            foot_face = yaw(foot_heading)
+            target = np.concatenate([station_xy, target[:, 2:]], axis=1) + \
+                foot_face.apply(np.stack([np.full_like(x, ankle_x), target[:, 1], np.zeros_like(x)], axis=1))
+            knee_pole = foot_face.apply(knee_pole)
         pose.solve_limb(f"leg_{side}", LEGS[side], target, knee_pole)
-        pose.set_global(LEGS[side].end, Rotation.identity(len(t)))  # feet flat, facing +x
+        pose.set_global(LEGS[side].end, foot_face)
 
     for side, sign in (("L", 1.0), ("R", -1.0)):
         other = feet["R" if side == "L" else "L"][0]
         swing = 0.25 * (other - feet[side][0]) * (1 - script.grip)  # arms swing against the legs
         shoulder = pose.joint_pos(ARMS[side].upper)
         back = swing - 0.3 * np.sin(script.lean)  # bent over, loose hands stay by the knees, clear of the box
-        free_wrist = shoulder + np.stack([back, np.full_like(t, sign * 0.05), np.full_like(t, -0.48)], axis=1)
-        free_hand = hand_rotation(side, np.array([0.1, 0.0, -1.0]), np.array([0.0, -sign, 0.0]))
+        free_offset = np.stack([back, np.full_like(t, sign * 0.05), np.full_like(t, -0.48)], axis=1)
+        free_fingers, free_palm = np.array([0.1, 0.0, -1.0]), np.array([0.0, -sign, 0.0])
+        if turning:
+            free_offset = face.apply(free_offset)
+            free_fingers, free_palm = face.apply(np.tile(free_fingers, (len(t), 1))), face.apply(np.tile(free_palm, (len(t), 1)))
+        free_wrist = shoulder + free_offset
+        free_hand = hand_rotation(side, free_fingers, free_palm)
         palm, fingers, normal = _box_hand_targets(script, side)
         box_hand = hand_rotation(side, fingers, normal)
         box_wrist = palm - box_hand.apply(L_PALM_CENTRE if side == "L" else R_PALM_CENTRE)
         w = script.grip[:, None]
         turn = np.clip(script.turn_lead * w, 0.0, 1.0)
         hand = free_hand * Rotation.from_rotvec(turn * (free_hand.inv() * box_hand).as_rotvec())
-        pole_free = np.array([-1.0, sign * 0.3, 0.0])
+        pole_free = face.apply(np.tile([-1.0, sign * 0.3, 0.0], (len(t), 1))) if turning else \
+            np.array([-1.0, sign * 0.3, 0.0])
         pole_box = (
             np.array([-0.4, sign * 0.5, -1.0])
             if script.hold_style == "sides"

@@ -2,6 +2,7 @@ import time
 
 import numpy as np
 import pytest
+from scipy.spatial.transform import Rotation
 
 from robot_hoi.data.clip import FRAME_ARRAYS
 from robot_hoi.data.contacts import ContactParams, body_surface_distance
@@ -141,6 +142,11 @@ def test_base_motion_library_walks_carries_and_squats():
             assert not clip.contact.any() and travel > 0.9  # walks past the box without touching it
             moving = np.linalg.norm(np.diff(clip.root_pos[:, :2], axis=0), axis=-1) * clip.fps
             speeds.append(np.percentile(moving, 90))
+        elif kind == "turn":  # seeds 0-3: left 45, right 45, left 90, right 90 degrees
+            seed = int(source.split(":")[2])
+            turned = np.degrees(Rotation.from_quat(clip.root_quat_xyzw[[0, -1]]).as_euler("zyx")[:, 0] @ [-1, 1])
+            assert turned == pytest.approx((45.0 if seed % 4 < 2 else 90.0) * (1 if seed % 2 == 0 else -1), abs=1.0)
+            assert not clip.contact.any() and travel > 1.0
         elif kind == "carry":
             assert clip.contact.any() and travel > 0.9
             assert np.ptp(clip.root_pos[: int(0.5 * clip.fps), 0]) < 0.02  # no walk-up: the box is at the feet
