@@ -18,7 +18,7 @@ from collections.abc import Callable
 import mujoco
 import numpy as np
 
-from robot_hoi.sim.scene import with_body_mass
+from robot_hoi.utils.mujoco_model import with_body_mass
 from sim2sim.layout import WorldLayout
 from sim2sim.perturbations import Perturbation
 

@@ -55,7 +55,7 @@ class PhysicsBackend(ABC):
     @abstractmethod
     def set_body_mass_levels(self, body_id: int, masses: list[float]) -> None:
         """Prepare the masses (kg) body `body_id` may take (inertia scaled alike, derived constants recomputed:
-        sim.scene.with_body_mass); every environment starts at the model's own. Once, before `select_body_mass`;
+        utils.mujoco_model.with_body_mass); every environment starts at the model's own. Once, before `select_body_mass`;
         one body per backend."""
 
     @abstractmethod

@@ -15,7 +15,7 @@ from mujoco import rollout
 from torch import Tensor
 
 from robot_hoi.sim.backend import PhysicsBackend
-from robot_hoi.sim.scene import with_body_mass
+from robot_hoi.utils.mujoco_model import with_body_mass
 
 _STATE_SPEC = mujoco.mjtState.mjSTATE_FULLPHYSICS.value
 _CTRL_SPEC = mujoco.mjtState.mjSTATE_CTRL.value

@@ -76,21 +76,6 @@ def add_object(spec: mujoco.MjSpec, vertices: np.ndarray, faces: np.ndarray, *, 
                   rgba=[0.8, 0.55, 0.3, 1.0])
 
 
-def with_body_mass(model: mujoco.MjModel, body_id: int, mass: float) -> mujoco.MjModel:
-    """A copy of `model` whose body `body_id` weighs `mass` kg, its inertia scaled with it (same shape and density
-    distribution), and the constants derived from masses (subtree masses, inverse weights) recomputed."""
-    import copy
-
-    if not mass > 0:
-        raise ValueError(f"body mass must be positive, not {mass}")
-    variant = copy.copy(model)
-    scale = mass / float(model.body_mass[body_id])
-    variant.body_mass[body_id] = mass
-    variant.body_inertia[body_id] *= scale
-    mujoco.mj_setConst(variant, mujoco.MjData(variant))
-    return variant
-
-
 def add_sensors(spec: mujoco.MjSpec, link_map: dict[str, str]) -> list[str]:
     """Link pose/velocity blocks and contact sensors; returns the contact sensor names in order."""
     body_names = {b.name for b in spec.bodies}

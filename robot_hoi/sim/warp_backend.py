@@ -23,7 +23,7 @@ from torch import Tensor
 from robot_hoi.errors import UserError
 from robot_hoi.sim.backend import PhysicsBackend
 from robot_hoi.sim.device import import_warp, resolve_physics
-from robot_hoi.sim.scene import with_body_mass
+from robot_hoi.utils.mujoco_model import with_body_mass
 
 # Per-world capacities. Contacts are pooled across worlds (one world may exceed this); constraint rows are not:
 # pyramidal condim-3 contacts take 4 rows each, plus joint limits and the hands' mimic equalities.

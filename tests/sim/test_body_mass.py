@@ -8,7 +8,7 @@ import pytest
 import torch
 
 from robot_hoi.sim import make_backend
-from robot_hoi.sim.scene import with_body_mass
+from robot_hoi.utils.mujoco_model import with_body_mass
 
 XML = """
 <mujoco><option timestep="0.005" integrator="implicitfast"/>

@@ -22,7 +22,11 @@ from robot_hoi.tasks.interaction.mdp import observations as obs_terms
 from robot_hoi.tasks.interaction.mdp import rewards as reward_terms
 from robot_hoi.tasks.interaction.mdp import terminations as term_terms
 from robot_hoi.tasks.interaction.psi import PsiBuffer
-from robot_hoi.tasks.interaction.reference import ReferenceMotion, nearest_surface_vectors, object_points_world
+from robot_hoi.tasks.interaction.reference import (
+    ReferenceMotion,
+    nearest_surface_vectors,
+    object_points_world,
+)
 from robot_hoi.tasks.interaction.scene_setup import InteractionScene
 from robot_hoi.utils.timing import OFF
 from robot_hoi.utils.torch_rot import quat_apply, quat_apply_inverse, quat_mul, quat_to_matrix, yaw_quat
