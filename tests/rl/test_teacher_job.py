@@ -65,3 +65,20 @@ def test_retry_resumes_with_what_is_left_and_resume_continues(job, tmp_path):
     again = train_teacher_group(replace(job, run_token="second", resume=True), log=lambda _: None)
     assert again["resumed_from"] == 2 and again["iteration"] == 4 and _steps(folder) == [1, 2, 3, 4]
     assert json.loads((folder / EVAL_FILE).read_text())["checkpoint"] == "model_4.pt"
+
+
+def test_init_starts_a_new_run_from_another_runs_policy(job, tmp_path):
+    from robot_hoi.rl.checkpoint import read_checkpoint
+
+    base = train_teacher_group(job, log=lambda _: None)
+    base_ckpt = tmp_path / "push" / base["checkpoint"]
+    logs = []
+    clip = replace(job, run_dir=str(tmp_path / "clip"), run_token="clip", budget=Budget(iterations=1),
+                   train_cfg=replace(job.train_cfg, seed=job.train_cfg.seed + 7), init=str(base_ckpt))
+    started = train_teacher_group(clip, log=logs.append)
+    assert started["iteration"] == 1 and any("initialised from" in line for line in logs)  # counters start afresh
+    ours, theirs = read_checkpoint(tmp_path / "clip" / "model_1.pt"), read_checkpoint(base_ckpt)
+    # one PPO iteration moved the weights a little from the base policy's, not from a fresh initialisation
+    name = next(k for k in theirs["model"] if k.startswith("actor") and k.endswith("weight"))
+    drift = (ours["model"][name] - theirs["model"][name]).abs().mean()
+    assert drift < 0.1 * theirs["model"][name].abs().mean()
