@@ -44,9 +44,10 @@ def register(subparsers) -> None:
                    help="override, e.g. --set env.num_envs=128 --set ppo.actor_lr=1e-4 (repeatable)")
     p.add_argument("--resume", action="store_true", help="continue each group from its latest checkpoint")
     p.add_argument("--init", default=None, metavar="CHECKPOINT",
-                   help="start each teacher from this policy's weights and normalisers (e.g. a base policy or "
-                        "another clip's teacher; same observation layout), with fresh optimiser and counters; "
-                        "ignored where a group resumes")
+                   help="start each teacher from this policy's weights and normalisers (a base policy or another "
+                        "clip's teacher; same observation layout), with fresh optimiser and counters; ignored where "
+                        "a group resumes. Default: the shipped base policy policies/base_<embodiment>.pt when there "
+                        "is one; 'none' trains from scratch")
     p.add_argument("--backend", default=None, choices=["auto", "cpu", "warp"],
                    help="physics: cpu (mujoco.rollout), warp (MuJoCo Warp; a GPU, or warp's CPU device) or auto "
                         "(warp when a CUDA device is present); default: the task config's (auto) for teachers, "
@@ -140,6 +141,7 @@ def run(args: argparse.Namespace) -> int:
     train_cfg = load_train_config(args.config or PRESETS[args.preset], train_overrides)
     budget = parse_budget(args.budget)
 
+    init = base_policy_init(args.init, embodiment.name)
     sources = factory.expand_sources(args.data)
     options = clip_options(args)
     clips = [factory.load_source(s, options) for s in sources]
@@ -154,7 +156,7 @@ def run(args: argparse.Namespace) -> int:
     jobs = [TeacherJob(group=name, sources=[sources[i] for i in members], run_dir=str(out / name),
                        embodiment=embodiment.name, env_cfg=env_cfg, train_cfg=train_cfg, budget=per_group,
                        run_token=token, device=args.device, torch_threads=max(args.torch_threads, 1),
-                       resume=args.resume, init=args.init, eval_episodes=args.eval_episodes,
+                       resume=args.resume, init=init, eval_episodes=args.eval_episodes,
                        preempt_marker_dir=os.environ.get(PREEMPT_HOOK_ENV) or None, clip_options=options)
             for name, members in groups.items()]
     group_clips = [[clips[i] for i in members] for members in groups.values()]
@@ -190,3 +192,23 @@ def _split_budget(budget, parts: int):
     share = {k: (None if v is None else type(v)(max(v / parts, 1))) for k, v in
              (("wall_seconds", budget.wall_seconds), ("samples", budget.samples), ("iterations", budget.iterations))}
     return replace(budget, **share)
+
+
+def base_policy_init(init: str | None, embodiment: str) -> str | None:
+    """The checkpoint teachers start from: `--init` as given ('none': from scratch), else the shipped base policy
+    of the embodiment when the repository has one."""
+    from robot_hoi.paths import POLICIES_DIR
+
+    from robot_hoi.errors import UserError
+
+    if init is not None:
+        if init.lower() == "none":
+            return None
+        if not Path(init).is_file():
+            raise UserError(f"{init}: no such checkpoint to start the teachers from (--init)")
+        return init
+    shipped = POLICIES_DIR / f"base_{embodiment}.pt"
+    if shipped.is_file():
+        print(f"teachers start from the shipped base policy {shipped} (--init none trains from scratch)")
+        return str(shipped)
+    return None

@@ -82,3 +82,17 @@ def test_init_starts_a_new_run_from_another_runs_policy(job, tmp_path):
     name = next(k for k in theirs["model"] if k.startswith("actor") and k.endswith("weight"))
     drift = (ours["model"][name] - theirs["model"][name]).abs().mean()
     assert drift < 0.1 * theirs["model"][name].abs().mean()
+
+
+def test_teachers_start_from_the_shipped_base_policy_unless_told(tmp_path, monkeypatch):
+    from robot_hoi import paths
+    from robot_hoi.errors import UserError
+    from robot_hoi.rl.cli import base_policy_init
+
+    monkeypatch.setattr(paths, "POLICIES_DIR", tmp_path)
+    assert base_policy_init(None, "g1_inspire") is None  # nothing shipped: from scratch
+    (tmp_path / "base_g1_inspire.pt").write_bytes(b"weights")
+    assert base_policy_init(None, "g1_inspire") == str(tmp_path / "base_g1_inspire.pt")
+    assert base_policy_init("none", "g1_inspire") is None
+    with pytest.raises(UserError, match="no such checkpoint"):
+        base_policy_init(str(tmp_path / "missing.pt"), "g1_inspire")
