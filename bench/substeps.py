@@ -25,14 +25,13 @@ from __future__ import annotations
 import argparse
 import os
 import platform
-import statistics
 import time
 from pathlib import Path
 
 import mujoco
 import numpy as np
 import torch
-from mujoco import rollout
+from train_throughput import rollout_rate  # bench/ is on the path when run as a script
 
 CONTROL_HZ = 30.0
 STANCE_S, PUSH_AT_S, PUSH_SPEED = 3.0, 0.5, 0.5
@@ -69,20 +68,7 @@ def raw_rate(scene, envs: int, threads: int, steps: int, repeats: int) -> float:
     mujoco.mj_getState(model, data, state0[0], spec)
     state0[:] = state0[0]
     ctrl = np.ascontiguousarray(np.broadcast_to(_hold_targets(scene), (envs, n, model.nu)))
-    state_out = np.zeros((envs, n, state0.shape[1]))
-    sens_out = np.zeros((envs, n, model.nsensordata))
-    models, datas = [model] * envs, [mujoco.MjData(model) for _ in range(threads)]
-    rates = []
-    with rollout.Rollout(nthread=threads) as pool:
-        for _ in range(repeats):
-            state = state0.copy()
-            t0 = time.perf_counter()
-            for _ in range(steps):
-                pool.rollout(models, datas, state, ctrl, skip_checks=True, nstep=n, state=state_out,
-                             sensordata=sens_out)
-                state[:] = state_out[:, -1]
-            rates.append(envs * steps / (time.perf_counter() - t0))
-    return statistics.median(rates)
+    return rollout_rate(model, state0, ctrl, threads, steps, repeats)
 
 
 def pelvis_track(scene, push: bool) -> np.ndarray:

@@ -84,9 +84,18 @@ def raw_rollout_rate(env, threads: int, steps: int, repeats: int) -> float:
     targets = torch.maximum(torch.minimum(env.action_offset().expand(env.num_envs, -1), env.ctrl_high), env.ctrl_low)
     decimation = env.backend.decimation
     ctrl = np.ascontiguousarray(np.repeat(targets.detach().cpu().double().numpy()[:, None], decimation, axis=1))
-    state_out = np.zeros((env.num_envs, decimation, state0.shape[1]))
-    sens_out = np.zeros((env.num_envs, decimation, model.nsensordata))
-    models = [model] * env.num_envs
+    return rollout_rate(model, state0, ctrl, threads, steps, repeats)
+
+
+def rollout_rate(model: mujoco.MjModel, state0: np.ndarray, ctrl: np.ndarray, threads: int, steps: int,
+                 repeats: int) -> float:
+    """Median control steps/s of `steps` mujoco.rollout calls from the full-physics states `state0` (envs, nstate),
+    each of ctrl.shape[1] physics steps with the controls `ctrl` (envs, sub-steps, nu) held, recording states and
+    sensors as the CPU backend does."""
+    envs, decimation = ctrl.shape[:2]
+    state_out = np.zeros((envs, decimation, state0.shape[1]))
+    sens_out = np.zeros((envs, decimation, model.nsensordata))
+    models = [model] * envs
     datas = [mujoco.MjData(model) for _ in range(threads)]
     rates = []
     with rollout.Rollout(nthread=threads) as pool:
@@ -97,7 +106,7 @@ def raw_rollout_rate(env, threads: int, steps: int, repeats: int) -> float:
                 pool.rollout(models, datas, state, ctrl, skip_checks=True, nstep=decimation, state=state_out,
                              sensordata=sens_out)
                 state[:] = state_out[:, -1]
-            rates.append(env.num_envs * steps / (time.perf_counter() - t0))
+            rates.append(envs * steps / (time.perf_counter() - t0))
     return statistics.median(rates)
 
 

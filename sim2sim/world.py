@@ -35,7 +35,6 @@ class Listener:
 class SimWorld:
     def __init__(self, model: mujoco.MjModel, layout: WorldLayout, perturbation: Perturbation,
                  rng: np.random.Generator):
-        self.model = model
         self.layout = layout
         self.perturbation = perturbation
         self.physics = perturbation.physics

@@ -121,9 +121,9 @@ def retarget_targets(
     limited[:, upper_qadr] = limit_speed(limited[:, upper_qadr], options.executable.max_joint_speed / targets.fps)
     result = solver.evaluate(limited, targets.pos, result.iterations, track)
     squeeze = _squeeze(model, cfg, result.qpos, hold, targets.fps, options)
-    loaded = body_joints if options.executable.compensate_leg_loads else upper
-    loads = _load_compensation(model, result.qpos, loaded, hold, targets, options,
-                               (solver.sole_body, solver.sole_local) if len(solver.sole_body) else None)
+    legs = options.executable.compensate_leg_loads
+    soles = (solver.sole_body, solver.sole_local) if legs and len(solver.sole_body) else None
+    loads = _load_compensation(model, result.qpos, body_joints if legs else upper, hold, targets, options, soles)
     seconds = time.perf_counter() - start
 
     act_qadr = model.jnt_qposadr[model.actuator_trnid[:, 0]]
@@ -189,7 +189,7 @@ def _load_compensation(model: mujoco.MjModel, qpos: np.ndarray, joints: list[str
                        soles: tuple[np.ndarray, np.ndarray] | None) -> np.ndarray:
     """(T, nq) load-compensation offsets for the `joints`' PD targets (executable.py; waist and arms, and the legs
     with compensate_leg_loads): gravity on the links, and the object's weight (when its mass is known) shared by the
-    holding hands while it is off its rest; with leg loads, carried down to the feet on the floor."""
+    holding hands while it is off its rest; with `soles` (leg loads), carried down to the feet on the floor."""
     if not options.executable.compensate_loads:
         return np.zeros_like(qpos)
     carried = {}
@@ -200,8 +200,6 @@ def _load_compensation(model: mujoco.MjModel, qpos: np.ndarray, joints: list[str
         for side in hold:
             share = np.where(hold[side], 1.0 / np.maximum(both, 1.0), 0.0)
             carried[f"{side}_wrist_yaw_link"] = lifted * share * targets.object_mass_kg * 9.81
-    if not options.executable.compensate_leg_loads:
-        soles = None
     return load_offsets(model, qpos, joints, carried, soles, options.executable.support_height)
 
 

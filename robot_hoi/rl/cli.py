@@ -197,9 +197,8 @@ def _split_budget(budget, parts: int):
 def base_policy_init(init: str | None, embodiment: str) -> str | None:
     """The checkpoint teachers start from: `--init` as given ('none': from scratch), else the shipped base policy
     of the embodiment when the repository has one."""
-    from robot_hoi.paths import POLICIES_DIR
-
     from robot_hoi.errors import UserError
+    from robot_hoi.paths import POLICIES_DIR
 
     if init is not None:
         if init.lower() == "none":

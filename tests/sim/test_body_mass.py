@@ -10,22 +10,13 @@ import torch
 from robot_hoi.sim import make_backend
 from robot_hoi.utils.mujoco_model import with_body_mass
 
-XML = """
-<mujoco><option timestep="0.005" integrator="implicitfast"/>
-<worldbody><geom type="plane" size="5 5 .1"/>
-<body name="base" pos="0 0 0.5"><freejoint/><geom type="box" size=".1 .1 .1" mass="1"/>
- <body name="arm" pos="0.2 0 0"><joint name="hinge" axis="0 1 0" range="-2 2"/>
-  <geom type="capsule" size=".02" fromto="0 0 0 .3 0 0" mass=".3"/></body></body>
-</worldbody>
-<actuator><position joint="hinge" kp="50" kv="2"/></actuator>
-<sensor><framepos objtype="xbody" objname="base"/></sensor>
-</mujoco>"""
+from .conftest import ARM_ON_BOX_XML
 
 BACKENDS = ["cpu"] + (["warp"] if importlib.util.find_spec("mujoco_warp") else [])
 
 
 def test_with_body_mass_scales_inertia_and_recomputes_derived_constants():
-    model = mujoco.MjModel.from_xml_string(XML)
+    model = mujoco.MjModel.from_xml_string(ARM_ON_BOX_XML)
     base = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, "base")
     heavy = with_body_mass(model, base, 2.0)
     assert heavy.body_mass[base] == 2.0 and model.body_mass[base] == 1.0  # a copy: the original is unchanged
@@ -39,7 +30,7 @@ def test_with_body_mass_scales_inertia_and_recomputes_derived_constants():
 @pytest.mark.parametrize("name", BACKENDS)
 def test_each_env_steps_with_its_own_mass(name):
     """The same upward force lifts the 1 kg body (1.3 kg with its arm) and lets the 2 kg one (2.3 kg) fall."""
-    model = mujoco.MjModel.from_xml_string(XML)
+    model = mujoco.MjModel.from_xml_string(ARM_ON_BOX_XML)
     base = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, "base")
     backend = make_backend(name, model, num_envs=3, decimation=4, device="cpu" if name == "warp" else None)
     backend.set_body_mass_levels(base, [1.0, 2.0])

@@ -6,20 +6,11 @@ import torch
 
 from robot_hoi.sim import make_backend
 
-XML = """
-<mujoco><option timestep="0.005" integrator="implicitfast"/>
-<worldbody><geom type="plane" size="5 5 .1"/>
-<body name="base" pos="0 0 0.5"><freejoint/><geom type="box" size=".1 .1 .1" mass="1"/>
- <body name="arm" pos="0.2 0 0"><joint name="hinge" axis="0 1 0" range="-2 2"/>
-  <geom type="capsule" size=".02" fromto="0 0 0 .3 0 0" mass=".3"/></body></body>
-</worldbody>
-<actuator><position joint="hinge" kp="50" kv="2"/></actuator>
-<sensor><framepos objtype="xbody" objname="arm"/><contact subtree1="base" data="found" reduce="netforce" num="1"/></sensor>
-</mujoco>"""
+from .conftest import ARM_ON_BOX_XML
 
 
 def test_batched_step_matches_sequential_mujoco():
-    model = mujoco.MjModel.from_xml_string(XML)
+    model = mujoco.MjModel.from_xml_string(ARM_ON_BOX_XML)
     backend = make_backend("cpu", model, num_envs=4, decimation=5, nthread=2)
     targets = torch.linspace(-1.0, 1.0, 4)[:, None].to(torch.float64)
     for _ in range(20):
@@ -37,7 +28,7 @@ def test_batched_step_matches_sequential_mujoco():
 
 
 def test_set_state_recomputes_sensors_exactly():
-    model = mujoco.MjModel.from_xml_string(XML)
+    model = mujoco.MjModel.from_xml_string(ARM_ON_BOX_XML)
     backend = make_backend("cpu", model, num_envs=3, decimation=4, nthread=2)
     backend.step(torch.zeros(3, 1))
     qpos = backend.qpos.clone()
