@@ -13,7 +13,8 @@ PD targets of a zero action held, recording states and sensors as the backend do
 
 Ends with `train_vs_raw_physics: <training env samples/s / raw control steps/s>` (issue 15's goal: >= 0.57).
 
-    python bench/train_throughput.py [--iterations 30] [--num-envs 64] [--threads N] [--torch-threads 1]
+    python bench/train_throughput.py [--iterations 30] [--num-envs N] [--threads N] [--torch-threads 1]
+                                     [--train-set ppo.horizon=24]
 """
 
 from __future__ import annotations
@@ -54,7 +55,7 @@ def build_training(args, run_dir: Path):
     from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg
     from robot_hoi.utils.config import load_yaml_dataclass
 
-    overrides = [f"num_envs={args.num_envs}"]
+    overrides = [] if args.num_envs is None else [f"num_envs={args.num_envs}"]
     if args.threads:
         overrides.append(f"nthread={args.threads}")
     if args.backend:
@@ -62,7 +63,7 @@ def build_training(args, run_dir: Path):
     env_cfg = resolve_env_cfg(load_yaml_dataclass(InteractionEnvCfg, TASK_CONFIG, overrides))
     embodiment = load_embodiment("g1_inspire")
     env_cfg.embodiment = embodiment.name
-    train_cfg = load_train_config(PRESETS[args.preset], ["runner.progress=false"])
+    train_cfg = load_train_config(PRESETS[args.preset], ["runner.progress=false", *args.train_set])
     clip = factory.load_source(args.clip)
     env = factory.make_env([clip], env_cfg, embodiment, cache=run_dir / "references")
     runner = OnPolicyRunner(env, train_cfg, run_dir, device=policy_device("auto", env.device))
@@ -114,7 +115,7 @@ def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--iterations", type=int, default=30, help="timed PPO iterations (default 30)")
     parser.add_argument("--warmup-iterations", type=int, default=2, help="untimed iterations first (default 2)")
-    parser.add_argument("--num-envs", type=int, default=64)
+    parser.add_argument("--num-envs", type=int, default=None, help="default: the task config's (what training uses)")
     parser.add_argument("--threads", type=int, default=None,
                         help="physics threads (default: the env's, min(cores, envs)); the raw ceiling uses the same")
     parser.add_argument("--torch-threads", type=int, default=1, help="torch CPU threads (robot-hoi train's default 1)")
@@ -122,6 +123,8 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--backend", default=None, choices=["auto", "cpu", "warp"],
                         help="physics backend of the training env (default: the task config's)")
     parser.add_argument("--clip", default="embedded:lift_place")
+    parser.add_argument("--train-set", action="append", default=[], metavar="KEY=VALUE",
+                        help="override of the training preset, e.g. ppo.horizon=24 (repeatable)")
     parser.add_argument("--raw-steps", type=int, default=48, help="control steps per raw repeat (one fast horizon)")
     parser.add_argument("--raw-repeats", type=int, default=5)
     args = parser.parse_args(argv)

@@ -90,7 +90,7 @@ class RandomizationCfg:
 @dataclass
 class InteractionEnvCfg:
     embodiment: str = "g1_inspire"
-    num_envs: int = 64
+    num_envs: int = 256
     backend: str = "auto"
     sim_device: str | None = None           # warp backend device ("cuda:1", "cpu"); None = cuda:0 if present, else cpu
     nthread: int | None = None
