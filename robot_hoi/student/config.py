@@ -180,6 +180,8 @@ class StudentTrainConfig(TrainConfig):
     unused: the actor is the Transformer of `student`."""
 
     eval_episodes: int = 4  # after training: student vs teachers, episodes per clip (0 skips)
+    num_envs: int | None = None  # student (and teacher rollout) envs; None: the teachers' (their task.json).
+    # --set env.num_envs=N wins over both
     student: TransformerConfig = field(default_factory=TransformerConfig)
     distill: DistillConfig = field(default_factory=DistillConfig)
     complexmimic: ComplexMimicConfig = field(default_factory=ComplexMimicConfig)
@@ -231,5 +233,8 @@ def load_student_config(path: str | Path = STUDENT_FAST_CONFIG, options: list[st
             (env if item.startswith("env.") else train).append(item)
     for item in overrides or []:
         (env if item.startswith("env.") else train).append(item)
-    cfg = load_yaml_dataclass(StudentTrainConfig, path)
-    return apply_overrides(cfg, train, source=str(path)), [e[len("env."):] for e in env]
+    cfg = apply_overrides(load_yaml_dataclass(StudentTrainConfig, path), train, source=str(path))
+    if cfg.num_envs is not None and cfg.num_envs <= 0:
+        raise UserError(f"{path}: num_envs must be positive or null, not {cfg.num_envs}")
+    env = [e[len("env."):] for e in env]
+    return cfg, ([f"num_envs={cfg.num_envs}"] if cfg.num_envs is not None else []) + env

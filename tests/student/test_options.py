@@ -21,7 +21,11 @@ from .conftest import student_args
 def test_option_presets_set_what_they_say():
     cfg, env = load_student_config(STUDENT_FAST_CONFIG, ["complexmimic"])
     assert cfg.complexmimic.enabled and (cfg.distill.loss, cfg.distill.weights, cfg.distill.beta) == ("kl", "fixed", 0)
-    assert env == ["psi.enabled=false"]
+    assert env == ["num_envs=64", "psi.enabled=false"]  # the fast preset's env count, then the option's
+    assert load_student_config(STUDENT_CONFIG)[1] == []  # the paper preset keeps the teachers' env count
+    assert load_student_config(STUDENT_FAST_CONFIG, overrides=["env.num_envs=8"])[1] == ["num_envs=64", "num_envs=8"]
+    with pytest.raises(UserError, match="num_envs must be positive"):
+        load_student_config(STUDENT_FAST_CONFIG, overrides=["num_envs=0"])
     cfg, _ = load_student_config(STUDENT_FAST_CONFIG, ["skillmimic_v2"])
     assert cfg.skillmimic.enabled and cfg.skillmimic.history and cfg.skillmimic.max_masked == 10
     cfg, _ = load_student_config(STUDENT_FAST_CONFIG, ["skillmimic_deployable"])
