@@ -125,7 +125,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--clip", default="embedded:lift_place")
     parser.add_argument("--train-set", action="append", default=[], metavar="KEY=VALUE",
                         help="override of the training preset, e.g. ppo.horizon=24 (repeatable)")
-    parser.add_argument("--raw-steps", type=int, default=48, help="control steps per raw repeat (one fast horizon)")
+    parser.add_argument("--raw-steps", type=int, default=48, help="control steps per raw repeat (default 48)")
     parser.add_argument("--raw-repeats", type=int, default=5)
     args = parser.parse_args(argv)
     if args.iterations < 1 or args.warmup_iterations < 0:
