@@ -156,7 +156,7 @@ def run(args: argparse.Namespace) -> int:
     jobs = [TeacherJob(group=name, sources=[sources[i] for i in members], run_dir=str(out / name),
                        embodiment=embodiment.name, env_cfg=env_cfg, train_cfg=train_cfg, budget=per_group,
                        run_token=token, device=args.device, torch_threads=max(args.torch_threads, 1),
-                       resume=args.resume, init=init, eval_episodes=args.eval_episodes,
+                       resume=args.resume, init=init, init_is_default=args.init is None, eval_episodes=args.eval_episodes,
                        preempt_marker_dir=os.environ.get(PREEMPT_HOOK_ENV) or None, clip_options=options)
             for name, members in groups.items()]
     group_clips = [[clips[i] for i in members] for members in groups.values()]

@@ -358,13 +358,26 @@ class OnPolicyRunner:
             self.alg.load_optimizer_state(data["optimizer"])
         return data
 
-    def initialise_from(self, path: str | Path) -> None:
-        """Start from another run's policy (weights and normalisers only): its observation layout must be ours,
-        else the same sizes would feed the wrong numbers to the wrong inputs."""
-        data = self.load(path)
+    def init_mismatch(self, path: str | Path) -> str | None:
+        """Why another run's policy cannot start this one (None when it can): its observation layout must be ours,
+        else the same sizes would feed the wrong numbers to the wrong inputs, and every tensor must fit our model."""
+        data = read_checkpoint(path)
         theirs, ours = data.get("obs_layout"), self.obs_layout()
         if theirs != ours:
-            raise UserError(f"{path}: its observation layout {theirs} is not this run's {ours}")
+            return f"its observation layout {theirs} is not this run's {ours}"
+        shapes = {k: tuple(v.shape) for k, v in self.model.state_dict().items()}
+        stored = {k: tuple(v.shape) for k, v in data["model"].items() if isinstance(v, Tensor)}
+        if stored != shapes:
+            differ = sorted(k for k in shapes.keys() | stored.keys() if shapes.get(k) != stored.get(k))
+            return f"its network differs from this run's in {', '.join(differ[:4])}"
+        return None
+
+    def initialise_from(self, path: str | Path) -> None:
+        """Start from another run's policy (weights and normalisers only); UserError when it does not fit."""
+        reason = self.init_mismatch(path)
+        if reason is not None:
+            raise UserError(f"{path}: {reason}")
+        self.load(path)
 
     def resume(self, path: str | Path) -> None:
         """Continue a run: weights, normalisers, optimisers, iteration/sample counters and the torch RNG."""

@@ -55,6 +55,7 @@ class TeacherJob:
     torch_threads: int = 1
     resume: bool = False  # --resume: continue from the latest checkpoint even if another invocation wrote it
     init: str | None = None  # --init: weights and normalisers to start from (not when resuming)
+    init_is_default: bool = False  # init is the shipped base policy, not asked for: from scratch where it does not fit
     eval_episodes: int = 4  # episodes per clip for eval.json
     eval_seed: int = 0
     preempt_marker_dir: str | None = None  # PREEMPT_HOOK_ENV, read by the driver
@@ -147,8 +148,13 @@ def train_teacher_group(job: TeacherJob, clips: list | None = None, log=print,
         resumed_from = runner.iteration
         log(f"[{job.group}] resumed from {resume_from.name} (iteration {runner.iteration})")
     elif job.init:
-        runner.initialise_from(job.init)
-        log(f"[{job.group}] initialised from {job.init}")
+        reason = runner.init_mismatch(job.init) if job.init_is_default else None
+        if reason is None:
+            runner.initialise_from(job.init)
+            log(f"[{job.group}] initialised from {job.init}")
+        else:
+            log(f"[{job.group}] training from scratch: the shipped base policy {job.init} does not fit this run "
+                f"({reason})")
     if not same_invocation:
         state = {"run_token": job.run_token, "start_iteration": runner.iteration,
                  "start_samples": runner.total_samples, "start_time_s": runner.total_time_s}

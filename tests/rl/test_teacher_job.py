@@ -84,6 +84,22 @@ def test_init_starts_a_new_run_from_another_runs_policy(job, tmp_path):
     assert drift < 0.1 * theirs["model"][name].abs().mean()
 
 
+def test_a_shipped_base_that_does_not_fit_trains_from_scratch_but_an_asked_for_one_is_an_error(job, tmp_path):
+    from robot_hoi.errors import UserError
+
+    base = train_teacher_group(job, log=lambda _: None)
+    base_ckpt = str(tmp_path / "push" / base["checkpoint"])
+    smaller = replace(job.train_cfg, model=replace(job.train_cfg.model, actor_hidden_dims=[32]))
+    clip = replace(job, run_dir=str(tmp_path / "clip"), run_token="clip", budget=Budget(iterations=1),
+                   train_cfg=smaller, init=base_ckpt, init_is_default=True)
+    logs = []
+    assert train_teacher_group(clip, log=logs.append)["iteration"] == 1
+    assert any("training from scratch" in line and "actor." in line for line in logs)
+    asked = replace(clip, run_dir=str(tmp_path / "asked"), run_token="asked", init_is_default=False)
+    with pytest.raises(UserError, match="network differs"):
+        train_teacher_group(asked, log=lambda _: None)
+
+
 def test_teachers_start_from_the_shipped_base_policy_unless_told(tmp_path, monkeypatch):
     from robot_hoi import paths
     from robot_hoi.errors import UserError
