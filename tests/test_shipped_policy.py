@@ -1,6 +1,7 @@
-"""The student shipped in policies/: its ONNX follows today's deploy contract, it completes the interaction in
+"""What policies/ ships. The student: its ONNX follows today's deploy contract, it completes the interaction in
 sim2sim (validation physics, self-collision on, simulated Inspire hands over serial bytes), and the robot runtime
-runs it in a dry run without faults."""
+runs it in a dry run without faults. The base policy (teachers' default start): it fits today's teacher network and
+observation layout, and it walks."""
 
 from __future__ import annotations
 
@@ -11,10 +12,13 @@ import pytest
 from robot_hoi.paths import POLICIES_DIR
 
 SHIPPED = POLICIES_DIR / "lift_place_student.onnx"
+BASE = POLICIES_DIR / "base_g1_inspire.pt"
 
-pytestmark = pytest.mark.skipif(not SHIPPED.is_file(), reason="no shipped student in policies/")
+shipped_student = pytest.mark.skipif(not SHIPPED.is_file(), reason="no shipped student in policies/")
+shipped_base = pytest.mark.skipif(not BASE.is_file(), reason="no shipped base policy in policies/")
 
 
+@shipped_student
 def test_shipped_student_meets_the_contract_and_carries_its_reference():
     from robot_hoi.cli import main
 
@@ -22,6 +26,7 @@ def test_shipped_student_meets_the_contract_and_carries_its_reference():
     assert main(["export", "check", str(SHIPPED), "--embodiment", "g1_inspire"]) == 0
 
 
+@shipped_student
 def test_shipped_student_lifts_the_box_in_sim2sim(tmp_path):
     from robot_hoi.cli import main
 
@@ -32,6 +37,7 @@ def test_shipped_student_lifts_the_box_in_sim2sim(tmp_path):
     assert cell["success_rate"] == 1.0 and cell["interaction_success_rate"] == 1.0
 
 
+@shipped_student
 def test_shipped_student_runs_on_the_dry_run_robot(tmp_path):
     from deploy.cli import main as deploy_main
 
@@ -41,3 +47,28 @@ def test_shipped_student_runs_on_the_dry_run_robot(tmp_path):
                         "--min-hand-rate-share", "0.2", "--status", "plain"])
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert code == 0 and summary["faults"] == [] and summary["policy_steps"] >= 100
+
+
+@shipped_base
+def test_shipped_base_policy_walks_a_clip_from_the_stand(capsys):
+    from robot_hoi.cli import main
+
+    # the eval builds today's env and loads the weights: a layout or network drift fails here, not in a user's run
+    assert main(["eval", str(BASE), "--data", "embedded:walk:0", "--episodes", "4", "--json"]) == 0
+    walk = next(iter(json.loads(capsys.readouterr().out)["clips"].values()))
+    assert walk["success_rate"] == 1.0 and walk["E_h_cm"] < 10.0
+
+
+@shipped_base
+def test_teachers_start_from_the_shipped_base_policy(tmp_path):
+    from robot_hoi.cli import main
+    from robot_hoi.rl.checkpoint import read_checkpoint, resolve_checkpoint
+
+    out = tmp_path / "run"
+    assert main(["train", "--budget", "1it", "--eval-episodes", "1", "--set", "env.num_envs=4",
+                 "--set", "ppo.horizon=4", "--set", "runner.progress=false", "--out", str(out)]) == 0
+    ours, base = read_checkpoint(resolve_checkpoint(out)), read_checkpoint(BASE)
+    assert ours["iteration"] == 1 and base["dims"] == ours["dims"]
+    name = "actor.0.weight"
+    drift = (ours["model"][name] - base["model"][name]).abs().mean()
+    assert drift < 0.05 * base["model"][name].abs().mean()  # one update away from the base, not a fresh network
