@@ -372,12 +372,15 @@ class OnPolicyRunner:
             return f"its network differs from this run's in {', '.join(differ[:4])}"
         return None
 
-    def initialise_from(self, path: str | Path) -> None:
-        """Start from another run's policy (weights and normalisers only); UserError when it does not fit."""
+    def initialise_from(self, path: str | Path, required: bool = True) -> str | None:
+        """Start from another run's policy (weights and normalisers only). When it does not fit: UserError if it was
+        `required`, else nothing is loaded and the reason is returned."""
         reason = self.init_mismatch(path)
-        if reason is not None:
+        if reason is None:
+            self.load(path)
+        elif required:
             raise UserError(f"{path}: {reason}")
-        self.load(path)
+        return reason
 
     def resume(self, path: str | Path) -> None:
         """Continue a run: weights, normalisers, optimisers, iteration/sample counters and the torch RNG."""

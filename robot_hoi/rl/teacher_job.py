@@ -148,9 +148,8 @@ def train_teacher_group(job: TeacherJob, clips: list | None = None, log=print,
         resumed_from = runner.iteration
         log(f"[{job.group}] resumed from {resume_from.name} (iteration {runner.iteration})")
     elif job.init:
-        reason = runner.init_mismatch(job.init) if job.init_is_default else None
+        reason = runner.initialise_from(job.init, required=not job.init_is_default)
         if reason is None:
-            runner.initialise_from(job.init)
             log(f"[{job.group}] initialised from {job.init}")
         else:
             log(f"[{job.group}] training from scratch: the shipped base policy {job.init} does not fit this run "
