@@ -67,6 +67,10 @@ LIFT_PLACE_PALM_BELOW_TOP = 0.22  # palm centres below the box top (m)
 LIFT_PLACE_PALM_FORWARD = -0.03  # palm centres ahead of the box centre (m)
 LIFT_PLACE_TURN_LEAD = 2.5  # hands turn to the grip this many times faster than they close in
 LIFT_PLACE_PREGRASP_GAP = 0.16  # wide approach: the robot's larger hands clear the box before turning in
+# lift_carry: the tall box, gripped as in lift_place and carried this high, at its grip distance (pulled 4 or 8 cm
+# closer, the knees' origins come within 4.8 / 1.6 cm of its back face while stepping; at the grip distance 7.9 cm)
+CARRY_RAISE_M = 0.30
+CARRY_PACE = 1.3  # x the walk-up's step time, / its step length: carrying is slower
 
 STAND_PELVIS_Z = 0.95
 WALK_PELVIS_Z = 0.91
@@ -161,7 +165,9 @@ def _depth(pelvis_z: np.ndarray, lowest: float) -> np.ndarray:
     return np.clip((WALK_PELVIS_Z - pelvis_z) / (WALK_PELVIS_Z - lowest), 0.0, 1.0)
 
 
-def _lift_carry_script(scene: Scene, gap_hold: float) -> Script:
+def _floor_carry_script(scene: Scene, gap_hold: float) -> Script:
+    """The base library's carries: walk up to the 0.4 m floor box (or start at it), squat deep, lift it 0.75 m,
+    carry it `travel`, put it down and stand."""
     x_grasp = scene.box_distance - GRASP_DISTANCE
     step = scene.step
     walk_up = [plan_walk(0.2, 0.0, x_grasp, **step)] if x_grasp > 0.05 else []  # carry: the box at the feet
@@ -302,8 +308,46 @@ def _lift_place_script(scene: Scene, gap_hold: float) -> Script:
                   palm_forward=LIFT_PLACE_PALM_FORWARD, turn_lead=LIFT_PLACE_TURN_LEAD)
 
 
-SCRIPTS = {"lift_carry": _lift_carry_script, "push": _push_script, "lift_place": _lift_place_script,
-           "walk": _walk_script, "carry": _lift_carry_script, "squat": _squat_script, "turn": _turn_script}
+def _walk_lift_carry_script(scene: Scene, gap_hold: float) -> Script:
+    """Walk up to the tall box, grip and lift it as in lift_place (no deep squat), carry it `travel` at a slower
+    pace, put it down and stand. The 0.4 m floor box of the base carries needs a squat with the pelvis 0.39 m up,
+    where the G1 sags ~5 cm below its reference even with the pelvis held and its hands open off the box (measured
+    in the root-held replay); the tall box is gripped where a slightly bent G1 reaches."""
+    x_grasp = scene.box_distance - LIFT_PLACE_DISTANCE
+    walk_up = plan_walk(0.2, 0.0, x_grasp, **scene.step)
+    carry_step = dict(scene.step, max_step=scene.step["max_step"] / CARRY_PACE,
+                      step_time=scene.step["step_time"] * CARRY_PACE)
+    t_bend = walk_up.t_end + 0.1
+    t_low, t_grip, t_lift, t_lifted = t_bend + 0.9, t_bend + 1.1, t_bend + 1.4, t_bend + 2.4
+    walk2 = plan_walk(t_lifted + 0.2, x_grasp, x_grasp + scene.travel, first="R", **carry_step)
+    t_down, t_placed = walk2.t_end + 0.1, walk2.t_end + 1.1
+    t_up, t_end = t_placed + 0.4, t_placed + 1.4
+    t = np.arange(int(round((t_end + 0.3) * FPS))) / FPS
+    pelvis_z = ramps(t, STAND_PELVIS_Z, [(0.0, 0.2, WALK_PELVIS_Z), (t_bend, t_low, LIFT_PLACE_PELVIS_Z),
+                                         (t_lift, t_lifted, WALK_PELVIS_Z), (t_down, t_placed, LIFT_PLACE_PELVIS_Z),
+                                         (t_up, t_end, STAND_PELVIS_Z)])
+    squat = np.clip((STAND_PELVIS_Z - pelvis_z) / (STAND_PELVIS_Z - SQUAT_PELVIS_Z), 0.0, 1.0)  # as lift_place
+    station = keyframes(t, walk_up.pelvis_keys() + [(t_lifted, x_grasp)] + walk2.pelvis_keys())
+    pelvis_x = station - HIPS_BACK * squat
+    lean = ramps(t, 0.05, [(t_bend, t_low, LIFT_PLACE_LEAN), (t_lift, t_lifted, 0.1),
+                           (t_down, t_placed, LIFT_PLACE_LEAN), (t_up, t_end, 0.05)])
+    z_rest = TALL_BOX_SIZE_M[2] / 2
+    rest1 = np.array([scene.box_distance, 0.0, z_rest])
+    rest2 = np.array([walk2.x_end + LIFT_PLACE_DISTANCE, 0.0, z_rest])
+    carried = np.stack([station + LIFT_PLACE_DISTANCE, np.zeros_like(t),
+                        np.full_like(t, z_rest + CARRY_RAISE_M)], axis=1)
+    up, down = ramp(t, t_lift, t_lifted)[:, None], ramp(t, t_down, t_placed)[:, None]
+    box_pos = (1 - up) * rest1 + up * ((1 - down) * carried + down * rest2)
+    grip = ramp(t, t_bend + 0.2, t_grip) * (1 - ramp(t, t_placed + 0.1, t_up + 0.3))
+    close = ramp(t, t_grip, t_lift) * (1 - ramp(t, t_placed, t_placed + 0.3))
+    gap = LIFT_PLACE_PREGRASP_GAP * (1 - close) + gap_hold * close
+    return Script(t, [walk_up, walk2], pelvis_x, pelvis_z, lean, squat, box_pos, grip, gap, "sides",
+                  TALL_BOX_SIZE_M, palm_height=TALL_BOX_SIZE_M[2] / 2 - LIFT_PLACE_PALM_BELOW_TOP,
+                  palm_forward=LIFT_PLACE_PALM_FORWARD, turn_lead=LIFT_PLACE_TURN_LEAD)
+
+
+SCRIPTS = {"lift_carry": _walk_lift_carry_script, "push": _push_script, "lift_place": _lift_place_script,
+           "walk": _walk_script, "carry": _floor_carry_script, "squat": _squat_script, "turn": _turn_script}
 
 
 def _box_hand_targets(script: Script, side: str):
@@ -420,7 +464,7 @@ def default_clip(kind: str = "lift_carry", *, seed: int = 0, artifacts=()) -> HO
     body_pos, body_quat, _ = _pose(script, offsets)
     body_pos, body_quat, box_pos, box_quat = _place_in_world(scene, body_pos, body_quat, script.box_pos)
     body_quat = make_quaternions_continuous(body_quat)[0]
-    tall = kind == "lift_place"
+    tall = kind in ("lift_place", "lift_carry")
     # one object, one set of surface samples, whatever the clip's seed (clips of one object share an env)
     box = box_asset(script.box_size, name="tall_box" if tall else "box",
                     mass_kg=TALL_BOX_MASS_KG if tall else BOX_MASS_KG)

@@ -115,10 +115,13 @@ def format_feasibility(f: dict) -> str:
         pairs = ", ".join(f"{k} {v} cm" for k, v in f["self_penetration_pairs"].items()) or "none over 1 cm"
         lines.append(f"self-penetration (self-collision on): deepest {f['self_penetration_cm']} cm, "
                      f"{100 * f['self_penetration_fraction']:.0f}% of frames over 1 cm ({pairs})")
-    if hold:
-        lines.append(f"hold test (root held, zero residual): object drop {hold['object_drop_cm']} cm over "
-                     f"{hold['frames_held']} held frames; {'ran to the end' if hold['completed'] else 'ended early'}"
-                     f" after {hold['frames']} frames")
+    if hold and hold.get("first_held_frame") is None:
+        lines.append("hold test: no frame where both hands hold the object")
+    elif hold:
+        end = "ran to the end" if hold["completed"] else f"ended by {hold.get('ended_by') or 'a termination'}"
+        lines.append(f"hold test (from frame {hold.get('start_frame')}, both hands hold from frame "
+                     f"{hold['first_held_frame']}; root held, zero residual): object drop {hold['object_drop_cm']} cm "
+                     f"over {hold['frames_held']} held frames; {end} after {hold['frames']} frames")
     return "\n".join(lines)
 
 

@@ -71,14 +71,16 @@ def test_nothing_without_a_clip_names_the_flag(tmp_path):
 
 
 def test_box_from_the_synthetic_clip(tmp_path, lift_clip):
-    """The synthetic box is 0.4 x 0.4 x 0.3 m; a clip saved without it gets a box of about that size."""
+    """lift_carry's box is 0.24 x 0.30 x 0.80 m; a clip saved without it gets a box of about that size."""
+    from robot_hoi.data.synth import TALL_BOX_SIZE_M
+
     clip = lift_clip.copy()
     clip.object = None
     path = clip.save(tmp_path / "clips" / "sub1_box_000.npz")
     loaded = load_clip(path, objects_dir=tmp_path / "none")
     assert "estimated from the clip" in loaded.object.origin
-    assert np.all(np.abs(np.sort(loaded.object.extents) - np.sort([0.4, 0.4, 0.3])) < 0.15)
-    assert any(p.startswith("object 'box': box") for p in loaded.problems)
+    assert np.all(np.abs(np.sort(loaded.object.extents) - np.sort(TALL_BOX_SIZE_M)) < 0.15)
+    assert any(p.startswith("object 'tall_box': box") for p in loaded.problems)
 
 
 @pytest.mark.shared

