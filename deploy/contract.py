@@ -34,6 +34,9 @@ unquoted string is accepted too)
                                                of action_offset (the policy outputs corrections to the reference)
     warmup_frames       int >= 0               optional, default 0: the reference clock holds frame 0 for this many
                                                policy ticks (stand-and-approach warmup); f(t) = max(t - warmup, 0)
+    warmup_blend        bool                   optional, default false. true ("reference" mode): during the warmup
+                                               the target offset glides from default_pose (tick 0) to frame 0's
+                                               joints, warmup_offset(); false: frame 0's joints from tick 0
     data                {"clips": [...], "license": str}
 
 Observation terms (name: size with A actuators, B = A - 12 body joints, K keyframes, L links) are defined in
@@ -91,6 +94,17 @@ REQUIRED_KEYS = (
     "data",
 )
 
+
+
+def warmup_offset(start, target, steps_done, warmup_frames):
+    """The PD target offset `steps_done` steps into a warmup of `warmup_frames` steps under the warmup blend: a
+    straight line from `start` (the pose the warmup began in; default_pose from the stand) at step 0 to `target`
+    (frame 0's joints), reached at the warmup's end. Stepping the target to a bent-over frame 0 at once makes the
+    robot lunge (on sub3_largebox_003 it knocks the box 5 cm and falls). numpy arrays or torch tensors (per-row
+    `steps_done` / `warmup_frames` as (N, 1) columns)."""
+    weight = steps_done / warmup_frames
+    weight = weight.clamp(max=1.0) if hasattr(weight, "clamp") else min(weight, 1.0)
+    return start + weight * (target - start)
 
 @dataclass(frozen=True)
 class _Dims:
@@ -158,6 +172,7 @@ class PolicyContract:
     data: dict = field(default_factory=dict)
     action_offset_mode: str = "fixed"
     warmup_frames: int = 0
+    warmup_blend: bool = False
 
     @property
     def num_actions(self) -> int:
@@ -197,6 +212,14 @@ class PolicyContract:
         """Reference frame of policy tick t: f(t) = min(max(t - warmup_frames, 0), T - 1)."""
         return min(max(int(tick) - self.warmup_frames, 0), num_frames - 1)
 
+    def reference_offset(self, tick: int, motion_joint_pos: np.ndarray) -> np.ndarray:
+        """The "reference" mode offset of policy tick t: joint_pos of frame f(t + 1), blended in from default_pose
+        over the warmup when warmup_blend is set."""
+        target = motion_joint_pos[self.reference_frame(tick + 1, len(motion_joint_pos))]
+        if not self.warmup_blend or tick >= self.warmup_frames:
+            return target
+        return warmup_offset(self.default_pose, target, tick, self.warmup_frames)
+
     def action_to_target(self, action: np.ndarray, offset: np.ndarray | None = None) -> np.ndarray:
         """Joint targets (rad): offset + scale * clip(action, -action_clip, action_clip). `offset` is the
         reference joint_pos of frame f(t + 1) in "reference" mode (required there), else action_offset."""
@@ -230,6 +253,7 @@ class PolicyContract:
             "data": self.data,
             "action_offset_mode": self.action_offset_mode,
             "warmup_frames": int(self.warmup_frames),
+            "warmup_blend": bool(self.warmup_blend),
         }
         return {key: json.dumps(value) for key, value in values.items()}
 
@@ -377,9 +401,13 @@ def _parse(metadata: dict[str, str], source: str) -> PolicyContract:
     warmup = _optional_json(metadata, "warmup_frames", 0, fail)
     if isinstance(warmup, bool) or not isinstance(warmup, int) or warmup < 0:
         raise fail("warmup_frames", f"must be an integer >= 0, got {warmup!r}")
+    blend = _optional_json(metadata, "warmup_blend", False, fail)
+    if not isinstance(blend, bool):
+        raise fail("warmup_blend", f"must be true or false, got {blend!r}")
     return PolicyContract(
         action_offset_mode=offset_mode,
         warmup_frames=warmup,
+        warmup_blend=blend,
         source=source,
         robot_hoi_version=values["robot_hoi.version"],
         embodiment=values["embodiment"],

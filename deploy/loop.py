@@ -341,14 +341,14 @@ class Runtime:
         self.last_action = action
         self.policy_steps += 1
         self.tracker.update_reference(self.policy_tick + 1)
-        return self.contract.action_to_target(action, self._reference_offset(self.policy_tick + 1)), action
+        return self.contract.action_to_target(action, self._reference_offset(self.policy_tick)), action
 
     def _reference_offset(self, tick: int) -> np.ndarray | None:
-        """The reference joints of frame f(tick) when the policy outputs corrections to the reference."""
+        """The reference joints tick t steps to (frame f(t + 1)) when the policy outputs corrections to the
+        reference."""
         if self.contract.action_offset_mode != "reference":
             return None
-        motion = self.builder.ctx.motion
-        return motion.joint_pos[self.contract.reference_frame(tick, motion.num_frames)]
+        return self.contract.reference_offset(tick, self.builder.ctx.motion.joint_pos)
 
     def _first_bad_term(self, state: RobotState) -> str:
         for name, value in self.builder.terms(state).items():

@@ -95,7 +95,7 @@ def run_onnx(args: argparse.Namespace) -> int:
         embodiment, build_model(embodiment), policy_kind="teacher", obs_spec=teacher_observation_spec(env),
         keyframes=env_cfg.keyframes, action_clip=env_cfg.action_clip,
         clips=[clip_identity(c, s) for c, s in zip(clips, task["sources"], strict=True)],
-        action_offset_mode=offset_mode(env_cfg), warmup_frames=env_cfg.warmup_frames,
+        **offset_settings(env_cfg),
     )
     report = export_policy(model.exported_policy(), model.num_actor_obs, metadata, out, recorded_obs=recorded_obs)
     for line in report.lines():
@@ -130,9 +130,12 @@ def run_check(args: argparse.Namespace) -> int:
     return 0
 
 
-def offset_mode(env_cfg) -> str:
-    """The contract's name for the env's action offset ("reference" or "fixed" = the default pose)."""
-    return "reference" if env_cfg.action_offset == "reference" else "fixed"
+def offset_settings(env_cfg) -> dict:
+    """The contract's action-offset keys for a training env: its mode ("reference" or "fixed" = the default pose),
+    the warmup length and whether the reference offset glides in over the warmup."""
+    mode = "reference" if env_cfg.action_offset == "reference" else "fixed"
+    return {"action_offset_mode": mode, "warmup_frames": env_cfg.warmup_frames,
+            "warmup_blend": env_cfg.warmup_blend and mode == "reference"}
 
 
 def record_observations(env, policy_fn, group: str, count: int):
@@ -185,7 +188,7 @@ def run_untrained(args: argparse.Namespace) -> int:
         keyframes=env_cfg.student_keyframes, action_clip=env_cfg.action_clip,
         clips=[clip_identity(clip, sources[0])],
         reference={"file": motion_file.name, "sha256": file_sha256(motion_file)},
-        action_offset_mode=offset_mode(env_cfg), warmup_frames=env_cfg.warmup_frames,
+        **offset_settings(env_cfg),
     )
     report = export_policy(model.exported_policy(), env.obs_dims["student"], metadata, out, recorded_obs=recorded)
     for line in report.lines():

@@ -19,10 +19,11 @@ def actuator_limits(model: mujoco.MjModel, names) -> tuple[np.ndarray, np.ndarra
 
 def policy_metadata(embodiment, model: mujoco.MjModel, *, policy_kind: str, obs_spec: list[dict],
                     keyframes, action_clip: float, clips: list[dict], reference: dict | None = None,
-                    action_offset_mode: str = "fixed", warmup_frames: int = 0) -> dict:
+                    action_offset_mode: str = "fixed", warmup_frames: int = 0, warmup_blend: bool = False) -> dict:
     """`action_offset_mode` "reference": the PD target offset is the reference motion's joint_pos at the frame
     being stepped to (tick t targets frame f(t + 1)), not `action_offset`; `warmup_frames`: the reference clock
-    holds frame 0 for this many policy ticks (the stand-and-approach warmup the policy was trained with)."""
+    holds frame 0 for this many policy ticks (the stand-and-approach warmup the policy was trained with);
+    `warmup_blend`: the offset glides in from the default pose over the warmup (deploy.contract.warmup_offset)."""
     names = list(embodiment.actuator_names)
     lower, upper, effort = actuator_limits(model, names)
     licenses = sorted({c.get("license") or "unknown" for c in clips})
@@ -38,6 +39,7 @@ def policy_metadata(embodiment, model: mujoco.MjModel, *, policy_kind: str, obs_
         "action_clip": float(action_clip),
         "action_offset_mode": action_offset_mode,
         "warmup_frames": int(warmup_frames),
+        "warmup_blend": bool(warmup_blend),
         "kp": embodiment.kp.tolist(),
         "kd": embodiment.kd.tolist(),
         "joint_lower": lower.tolist(),

@@ -22,7 +22,7 @@ def run_student_export(args: argparse.Namespace, ckpt: Path) -> int:
 
     from deploy.motion import file_sha256
     from robot_hoi.embodiment import build_model, load_embodiment
-    from robot_hoi.export.cli import offset_mode, record_observations
+    from robot_hoi.export.cli import offset_settings, record_observations
     from robot_hoi.export.metadata import actuator_limits, clip_identity, policy_metadata
     from robot_hoi.export.motion_sidecar import deploy_motion
     from robot_hoi.export.onnx_export import export_policy
@@ -77,7 +77,7 @@ def run_student_export(args: argparse.Namespace, ckpt: Path) -> int:
         keyframes=env_cfg.student_keyframes, action_clip=env_cfg.action_clip,
         clips=[clip_identity(clips[index], sources[index])],
         reference={"file": motion_file.name, "sha256": file_sha256(motion_file)},
-        action_offset_mode=offset_mode(env_cfg), warmup_frames=env_cfg.warmup_frames,
+        **offset_settings(env_cfg),
     )
     report = export_policy(model.exported_policy(), model.num_actor_obs, metadata, out, recorded_obs=recorded)
     for line in report.lines():

@@ -81,6 +81,40 @@ def test_warmup_holds_the_reference_clock(scene):
     assert torch.equal(env.ref_index, start + 1)  # then tracking begins
 
 
+
+def test_warmup_blend_matches_the_deploy_runtime(scene):
+    """With warmup_blend the env's PD offset over a stand start is, tick for tick, what the deploy runtime sends
+    (deploy.contract.reference_offset): one definition of the warmup, so sim2sim and the robot see the training's."""
+    import dataclasses
+
+    import numpy as np
+
+    from deploy.contract import ReferenceInfo
+    from deploy.devpolicy import make_contract
+    from deploy.embodiment import load_embodiment as load_deploy_embodiment
+
+    env = make_env(scene)
+    env.ref_joint_pos += 0.2  # a frame 0 away from the stand (this scene's reference stands)
+    env.cfg.warmup_blend = True
+    env.cfg.init.stand_start_probability = 1.0
+    env.cfg.init.spawn_noise_xy = 0.0
+    env.reset()
+    contract = dataclasses.replace(make_contract(load_deploy_embodiment("g1_inspire"),
+                                                 reference=ReferenceInfo("x.motion.npz", "0" * 64)),
+                                   action_offset_mode="reference", warmup_frames=env.cfg.warmup_frames,
+                                   warmup_blend=True)
+    np.testing.assert_allclose(contract.default_pose, env.default_joint_pos.numpy(), atol=1e-6)
+    clip = int(env.clip_id[0])
+    joint_pos = env.ref_joint_pos[env.clip_start[clip]:env.clip_end[clip] + 1].numpy().astype(np.float64)
+    assert np.abs(env.action_offset()[0].numpy() - joint_pos[0]).max() > 0.1  # the blend starts at the stand
+    for tick in range(env.cfg.warmup_frames + 3):
+        np.testing.assert_allclose(env.action_offset()[0].numpy(), contract.reference_offset(tick, joint_pos),
+                                   atol=1e-5, err_msg=f"tick {tick}")
+        env.step(torch.zeros(8, env.num_actions))
+    env.cfg.warmup_blend = False  # the step: frame 0's joints from the first tick
+    env.reset()
+    np.testing.assert_allclose(env.action_offset()[0].numpy(), joint_pos[0], atol=1e-6)
+
 def test_clip_end_truncates_with_success(scene):
     env = make_env(scene)
     env.cfg.init.stand_start_probability = 0.0

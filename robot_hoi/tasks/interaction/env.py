@@ -14,6 +14,7 @@ from types import SimpleNamespace
 import torch
 from torch import Tensor
 
+from deploy.contract import warmup_offset
 from robot_hoi import termination
 from robot_hoi.errors import UserError
 from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg
@@ -161,6 +162,8 @@ class InteractionEnv:
         self.clip_id = z(n, dtype=torch.long)
         self.ref_index = z(n, dtype=torch.long)
         self.warmup_left = z(n, dtype=torch.long)
+        self.warmup_length = z(n, dtype=torch.long)  # the warmup each episode began with
+        self.warmup_start_pos = z(n, self.num_actions)  # actuated joints when it began (the warmup blend's start)
         self.episode_length = z(n, dtype=torch.long)
         self.tracked_steps = z(n, dtype=torch.long)   # steps after the warmup: what duration and errors cover
         self.start_frame = z(n, dtype=torch.long)
@@ -241,9 +244,14 @@ class InteractionEnv:
         positions of the frame this step moves to, so that the policy learns corrections to the retarget."""
         if self.cfg.action_offset == "default":
             return self.default_joint_pos
-        next_index = torch.where(self.warmup_left > 0, self.ref_index,
-                                 torch.minimum(self.ref_index + 1, self._clip_end()))
-        return self.ref_joint_pos[next_index]
+        in_warmup = self.warmup_left > 0
+        next_index = torch.where(in_warmup, self.ref_index, torch.minimum(self.ref_index + 1, self._clip_end()))
+        target = self.ref_joint_pos[next_index]
+        if not self.cfg.warmup_blend:
+            return target
+        steps_done = (self.warmup_length - self.warmup_left)[:, None].float()
+        blended = warmup_offset(self.warmup_start_pos, target, steps_done, self.warmup_length[:, None].clamp(min=1))
+        return torch.where(in_warmup[:, None], blended, target)
 
     # ---- state --------------------------------------------------------------------------------------------------
     def _clip_end(self) -> Tensor:
@@ -438,6 +446,8 @@ class InteractionEnv:
         self.episode_max_error_h[env_ids] = 0.0
         self.episode_max_error_o[env_ids] = 0.0
         self._update_state(None if n == self.num_envs else env_ids)  # env_ids are distinct: n == all of them
+        self.warmup_length[env_ids] = self.warmup_left[env_ids]
+        self.warmup_start_pos[env_ids] = self.joint_pos[env_ids]
         self.prev_link_vel[env_ids] = self.link_vel[env_ids]
         self.prev_object_vel[env_ids] = self.object_lin_vel[env_ids]
         self.psi.on_reset(env_ids)

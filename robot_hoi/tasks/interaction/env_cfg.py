@@ -101,6 +101,8 @@ class InteractionEnvCfg:
     # The deployable observation (deploy/observations.py terms, in this order); empty = no "student" group.
     student_obs_terms: tuple[str, ...] = ()
     warmup_frames: int = 15                 # stand-and-approach frames (supp. F)
+    warmup_blend: bool = False              # the warmup's PD offset glides from the start pose to frame 0's joints
+                                            # (deploy.contract.warmup_offset) instead of stepping there at once
     max_episode_frames: int = 300           # supp. Table C
     reference_links: str = "ik"             # "ik" (robot-reachable link targets) | "scaled_human" (pure InterMimic)
     object_density: float = 25.0            # kg/m^3 of the hull (InterMimic's G1 setting); a known mass wins
