@@ -52,10 +52,12 @@ def _hand_bodies(spec: mujoco.MjSpec, prefix: str) -> dict[str, str]:
 
 
 def add_object(spec: mujoco.MjSpec, vertices: np.ndarray, faces: np.ndarray, *, density: float, friction: float,
-               contype: int, conaffinity: int, mass: float | None = None) -> None:
+               contype: int, conaffinity: int, mass: float | None = None, torsional_friction: float = 0.0) -> None:
     """The object as one convex hull of its mesh with a free joint (InterMimic: density 200, friction 0.9).
 
-    `mass`, when known, overrides the density (the hull is solid; a real box is hollow and much lighter)."""
+    `mass`, when known, overrides the density (the hull is solid; a real box is hollow and much lighter).
+    `torsional_friction` (m) > 0 gives its contacts torsional friction (condim 4): a palm's contact patch resists the
+    object turning about the palm's normal, which MuJoCo's point contacts (condim 3) do not."""
     hull = trimesh.Trimesh(vertices=vertices, faces=faces, process=True).convex_hull
     if mass is not None:
         density = mass / hull.volume
@@ -72,8 +74,8 @@ def add_object(spec: mujoco.MjSpec, vertices: np.ndarray, faces: np.ndarray, *, 
     body.fullinertia = [inertia[0, 0], inertia[1, 1], inertia[2, 2], inertia[0, 1], inertia[0, 2], inertia[1, 2]]
     body.add_freejoint(name=OBJECT_JOINT)
     body.add_geom(type=mujoco.mjtGeom.mjGEOM_MESH, meshname="object_hull", density=density,
-                  friction=[friction, 0.005, 0.0001], contype=contype, conaffinity=conaffinity,
-                  rgba=[0.8, 0.55, 0.3, 1.0])
+                  friction=[friction, torsional_friction or 0.005, 0.0001], condim=4 if torsional_friction > 0 else 3,
+                  contype=contype, conaffinity=conaffinity, rgba=[0.8, 0.55, 0.3, 1.0])
 
 
 def add_sensors(spec: mujoco.MjSpec, link_map: dict[str, str]) -> list[str]:

@@ -107,6 +107,7 @@ class InteractionEnvCfg:
     reference_links: str = "ik"             # "ik" (robot-reachable link targets) | "scaled_human" (pure InterMimic)
     object_density: float = 25.0            # kg/m^3 of the hull (InterMimic's G1 setting); a known mass wins
     object_friction: float = 0.9            # supp. Table A
+    object_torsional_friction: float = 0.0  # m; > 0: the object's contacts resist turning about their normal
     object_surface_points: int = 256        # samples for d_t
     self_collision: bool = False
     action_clip: float = 4.0
