@@ -95,7 +95,6 @@ REQUIRED_KEYS = (
 )
 
 
-
 def warmup_offset(start, target, steps_done, warmup_frames):
     """The PD target offset `steps_done` steps into a warmup of `warmup_frames` steps under the warmup blend: a
     straight line from `start` (the pose the warmup began in; default_pose from the stand) at step 0 to `target`
@@ -105,6 +104,7 @@ def warmup_offset(start, target, steps_done, warmup_frames):
     weight = steps_done / warmup_frames
     weight = weight.clamp(max=1.0) if hasattr(weight, "clamp") else min(weight, 1.0)
     return start + weight * (target - start)
+
 
 @dataclass(frozen=True)
 class _Dims:

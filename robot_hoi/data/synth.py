@@ -285,27 +285,72 @@ def _push_script(scene: Scene, gap_hold: float) -> Script:
     return Script(t, [walk1, walk2], pelvis_x, pelvis_z, lean, np.zeros_like(t), box_pos, grip, gap, "top")
 
 
+@dataclass(frozen=True)
+class _TallBoxPhases:
+    """When lift_place's bend, grip, lift and put-down happen (s); lift_carry walks in between."""
+
+    bend: float
+    down: float  # the put-down starts
+
+    @property
+    def low(self) -> float:
+        return self.bend + 0.9
+
+    @property
+    def grip(self) -> float:
+        return self.bend + 1.1
+
+    @property
+    def lift(self) -> float:
+        return self.bend + 1.4
+
+    @property
+    def lifted(self) -> float:
+        return self.bend + 2.4
+
+    @property
+    def placed(self) -> float:
+        return self.down + 1.0
+
+    @property
+    def up(self) -> float:
+        return self.down + 1.4
+
+    @property
+    def end(self) -> float:
+        return self.down + 2.4
+
+
+def _tall_box_hold(t: np.ndarray, p: _TallBoxPhases, gap_hold: float, carry_pelvis_z: float,
+                   first_moves=()) -> dict[str, np.ndarray]:
+    """Pelvis height, squat depth, lean, grip and palm gap of the tall box's bend-grip-lift and put-down: the pelvis
+    rises to `carry_pelvis_z` with the box; `first_moves` are pelvis-height ramps before the bend."""
+    pelvis_z = ramps(t, STAND_PELVIS_Z, [*first_moves, (p.bend, p.low, LIFT_PLACE_PELVIS_Z),
+                                         (p.lift, p.lifted, carry_pelvis_z), (p.down, p.placed, LIFT_PLACE_PELVIS_Z),
+                                         (p.up, p.end, STAND_PELVIS_Z)])
+    lean = ramps(t, 0.05, [(p.bend, p.low, LIFT_PLACE_LEAN), (p.lift, p.lifted, 0.1),
+                           (p.down, p.placed, LIFT_PLACE_LEAN), (p.up, p.end, 0.05)])
+    grip = ramp(t, p.bend + 0.2, p.grip) * (1 - ramp(t, p.placed + 0.1, p.up + 0.3))
+    close = ramp(t, p.grip, p.lift) * (1 - ramp(t, p.placed, p.placed + 0.3))
+    return dict(pelvis_z=pelvis_z, lean=lean, grip=grip,
+                squat=np.clip((STAND_PELVIS_Z - pelvis_z) / (STAND_PELVIS_Z - SQUAT_PELVIS_Z), 0.0, 1.0),
+                gap=LIFT_PLACE_PREGRASP_GAP * (1 - close) + gap_hold * close)
+
+
+# the tall box gripped on its sides: what the poser needs beyond the tracks
+TALL_BOX_GRIP = dict(hold_style="sides", box_size=TALL_BOX_SIZE_M,
+                     palm_height=TALL_BOX_SIZE_M[2] / 2 - LIFT_PLACE_PALM_BELOW_TOP,
+                     palm_forward=LIFT_PLACE_PALM_FORWARD, turn_lead=LIFT_PLACE_TURN_LEAD)
+
+
 def _lift_place_script(scene: Scene, gap_hold: float) -> Script:
-    t_bend, t_low = 0.5, 1.4
-    t_grip, t_lift, t_lifted = 1.6, 1.9, 2.9
-    t_down, t_placed = 3.9, 4.9
-    t_up, t_end = 5.3, 6.3
-    t = np.arange(int(round((t_end + 0.3) * FPS))) / FPS
-    pelvis_z = ramps(t, STAND_PELVIS_Z, [(t_bend, t_low, LIFT_PLACE_PELVIS_Z), (t_lift, t_lifted, STAND_PELVIS_Z),
-                                         (t_down, t_placed, LIFT_PLACE_PELVIS_Z), (t_up, t_end, STAND_PELVIS_Z)])
-    squat = np.clip((STAND_PELVIS_Z - pelvis_z) / (STAND_PELVIS_Z - SQUAT_PELVIS_Z), 0.0, 1.0)
-    pelvis_x = -HIPS_BACK * squat
-    lean = ramps(t, 0.05, [(t_bend, t_low, LIFT_PLACE_LEAN), (t_lift, t_lifted, 0.1),
-                           (t_down, t_placed, LIFT_PLACE_LEAN), (t_up, t_end, 0.05)])
+    p = _TallBoxPhases(bend=0.5, down=3.9)
+    t = np.arange(int(round((p.end + 0.3) * FPS))) / FPS
+    hold = _tall_box_hold(t, p, gap_hold, carry_pelvis_z=STAND_PELVIS_Z)
     rest = np.array([LIFT_PLACE_DISTANCE, 0.0, TALL_BOX_SIZE_M[2] / 2])
-    raised = ramp(t, t_lift, t_lifted) * (1 - ramp(t, t_down, t_placed))
+    raised = ramp(t, p.lift, p.lifted) * (1 - ramp(t, p.down, p.placed))
     box_pos = rest + raised[:, None] * np.array([-0.08, 0.0, LIFT_PLACE_RAISE])
-    grip = ramp(t, t_bend + 0.2, t_grip) * (1 - ramp(t, t_placed + 0.1, t_up + 0.3))
-    close = ramp(t, t_grip, t_lift) * (1 - ramp(t, t_placed, t_placed + 0.3))
-    gap = LIFT_PLACE_PREGRASP_GAP * (1 - close) + gap_hold * close
-    return Script(t, [], pelvis_x, pelvis_z, lean, squat, box_pos, grip, gap, "sides", TALL_BOX_SIZE_M,
-                  palm_height=TALL_BOX_SIZE_M[2] / 2 - LIFT_PLACE_PALM_BELOW_TOP,
-                  palm_forward=LIFT_PLACE_PALM_FORWARD, turn_lead=LIFT_PLACE_TURN_LEAD)
+    return Script(t=t, walks=[], pelvis_x=-HIPS_BACK * hold["squat"], box_pos=box_pos, **hold, **TALL_BOX_GRIP)
 
 
 def _walk_lift_carry_script(scene: Scene, gap_hold: float) -> Script:
@@ -318,33 +363,20 @@ def _walk_lift_carry_script(scene: Scene, gap_hold: float) -> Script:
     carry_step = dict(scene.step, max_step=scene.step["max_step"] / CARRY_PACE,
                       step_time=scene.step["step_time"] * CARRY_PACE)
     t_bend = walk_up.t_end + 0.1
-    t_low, t_grip, t_lift, t_lifted = t_bend + 0.9, t_bend + 1.1, t_bend + 1.4, t_bend + 2.4
-    walk2 = plan_walk(t_lifted + 0.2, x_grasp, x_grasp + scene.travel, first="R", **carry_step)
-    t_down, t_placed = walk2.t_end + 0.1, walk2.t_end + 1.1
-    t_up, t_end = t_placed + 0.4, t_placed + 1.4
-    t = np.arange(int(round((t_end + 0.3) * FPS))) / FPS
-    pelvis_z = ramps(t, STAND_PELVIS_Z, [(0.0, 0.2, WALK_PELVIS_Z), (t_bend, t_low, LIFT_PLACE_PELVIS_Z),
-                                         (t_lift, t_lifted, WALK_PELVIS_Z), (t_down, t_placed, LIFT_PLACE_PELVIS_Z),
-                                         (t_up, t_end, STAND_PELVIS_Z)])
-    squat = np.clip((STAND_PELVIS_Z - pelvis_z) / (STAND_PELVIS_Z - SQUAT_PELVIS_Z), 0.0, 1.0)  # as lift_place
-    station = keyframes(t, walk_up.pelvis_keys() + [(t_lifted, x_grasp)] + walk2.pelvis_keys())
-    pelvis_x = station - HIPS_BACK * squat
-    lean = ramps(t, 0.05, [(t_bend, t_low, LIFT_PLACE_LEAN), (t_lift, t_lifted, 0.1),
-                           (t_down, t_placed, LIFT_PLACE_LEAN), (t_up, t_end, 0.05)])
+    walk2 = plan_walk(t_bend + 2.6, x_grasp, x_grasp + scene.travel, first="R", **carry_step)  # 0.2 s after the lift
+    p = _TallBoxPhases(bend=t_bend, down=walk2.t_end + 0.1)
+    t = np.arange(int(round((p.end + 0.3) * FPS))) / FPS
+    hold = _tall_box_hold(t, p, gap_hold, carry_pelvis_z=WALK_PELVIS_Z, first_moves=[(0.0, 0.2, WALK_PELVIS_Z)])
+    station = keyframes(t, walk_up.pelvis_keys() + [(p.lifted, x_grasp)] + walk2.pelvis_keys())
     z_rest = TALL_BOX_SIZE_M[2] / 2
     rest1 = np.array([scene.box_distance, 0.0, z_rest])
     rest2 = np.array([walk2.x_end + LIFT_PLACE_DISTANCE, 0.0, z_rest])
     carried = np.stack([station + LIFT_PLACE_DISTANCE, np.zeros_like(t),
                         np.full_like(t, z_rest + CARRY_RAISE_M)], axis=1)
-    up, down = ramp(t, t_lift, t_lifted)[:, None], ramp(t, t_down, t_placed)[:, None]
+    up, down = ramp(t, p.lift, p.lifted)[:, None], ramp(t, p.down, p.placed)[:, None]
     box_pos = (1 - up) * rest1 + up * ((1 - down) * carried + down * rest2)
-    grip = ramp(t, t_bend + 0.2, t_grip) * (1 - ramp(t, t_placed + 0.1, t_up + 0.3))
-    close = ramp(t, t_grip, t_lift) * (1 - ramp(t, t_placed, t_placed + 0.3))
-    gap = LIFT_PLACE_PREGRASP_GAP * (1 - close) + gap_hold * close
-    return Script(t, [walk_up, walk2], pelvis_x, pelvis_z, lean, squat, box_pos, grip, gap, "sides",
-                  TALL_BOX_SIZE_M, palm_height=TALL_BOX_SIZE_M[2] / 2 - LIFT_PLACE_PALM_BELOW_TOP,
-                  palm_forward=LIFT_PLACE_PALM_FORWARD, turn_lead=LIFT_PLACE_TURN_LEAD)
-
+    return Script(t=t, walks=[walk_up, walk2], pelvis_x=station - HIPS_BACK * hold["squat"], box_pos=box_pos,
+                  **hold, **TALL_BOX_GRIP)
 
 SCRIPTS = {"lift_carry": _walk_lift_carry_script, "push": _push_script, "lift_place": _lift_place_script,
            "walk": _walk_script, "carry": _floor_carry_script, "squat": _squat_script, "turn": _turn_script}

@@ -50,8 +50,7 @@ def hold_test(clip, env_cfg, embodiment, motion=None, lead_frames: int = 10) -> 
         frames += 1
         if terminated[0] or truncated[0]:
             completed = bool(truncated[0])
-            log = info.get("log", {}) if isinstance(info, dict) else {}
-            ended_by = next((k.split("/", 1)[1] for k, v in log.items()
+            ended_by = next((k.split("/", 1)[1] for k, v in info["log"].items()
                              if k.startswith("Termination/") and float(v) > 0), None)
             break
         if both:
