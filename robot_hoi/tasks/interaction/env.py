@@ -175,6 +175,7 @@ class InteractionEnv:
         self.episode_max_error_h, self.episode_max_error_o = z(n), z(n)
         self.failure_counts = z(len(self.references), self.cfg.init.failure_segments)
         self.assisted = z(n)  # 1 where this episode gets the assist wrenches (drawn per episode)
+        self.grip_settle_left = z(n, dtype=torch.long)  # frames of a reference start's grip settle left
 
     # ---- VecEnv -------------------------------------------------------------------------------------------------
     def reset(self) -> dict[str, Tensor]:
@@ -187,8 +188,12 @@ class InteractionEnv:
         self.actions = actions.detach().clamp(-self.cfg.action_clip, self.cfg.action_clip)
         targets = self.action_offset() + self.action_scale * self.actions
         wrench = assist_terms.assist_wrench(self, self.assist_level) if self.assist_level > 0 else None
+        if self.cfg.init.grip_settle_frames > 0:
+            settle = assist_terms.grip_settle_wrench(self)
+            wrench = settle if wrench is None else wrench + settle
         self.backend.step(torch.maximum(torch.minimum(targets, self.ctrl_high), self.ctrl_low), wrench)
         timers.lap("physics")
+        self.grip_settle_left = (self.grip_settle_left - 1).clamp(min=0)
         self.episode_length += 1
         in_warmup = self.warmup_left > 0
         self.warmup_left = (self.warmup_left - 1).clamp(min=0)
@@ -401,15 +406,18 @@ class InteractionEnv:
 
         # reference/physical state initialisation for the others
         others = (~stand & ~custom).nonzero().flatten()
+        reference_start = torch.zeros(n, dtype=torch.bool, device=self.device)  # a reference state, not a simulated one
         if others.numel():
             states, frames = self.psi.sample(others.numel()) if self.psi.ready() else (None, None)
             if states is None:
                 frames = self._random_frames(clip[others])
                 states = self._reference_states(frames)
+                reference_start[others] = True
             else:  # seeded (reference) rows get a fresh RSI draw: seeds share no frozen noise
                 from_reference = states.isnan().any(-1)
                 if from_reference.any():
                     states[from_reference] = self._reference_states(frames[from_reference])
+                reference_start[others] = from_reference
             robot_state[others] = states[:, : robot_state.shape[1]]
             object_state[others] = states[:, robot_state.shape[1]:]
             frame[others] = frames
@@ -429,6 +437,7 @@ class InteractionEnv:
         if custom_ids.numel():
             self.warmup_left[env_ids[custom_ids]] = plan.hold[custom_ids]
         self.episode_length[env_ids] = 0
+        self.grip_settle_left[env_ids] = torch.where(reference_start, self.cfg.init.grip_settle_frames, 0)
         self.assisted[env_ids] = (torch.rand(n, generator=self.generator, device=self.device)
                                   < self.cfg.assist.assisted_share).float()
         if self.object_mass_levels is not None:  # a grid level per episode: log-uniform masses

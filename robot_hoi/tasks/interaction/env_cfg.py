@@ -53,6 +53,11 @@ class InitCfg:
     # that segment), so training spends its samples where episodes end (BeyondMimic's adaptive sampling).
     failure_weighted: bool = False
     failure_segments: int = 20
+    # A reference state holds the object with no grip force (the hands rest ~1 cm off the hull; the grasp squeeze
+    # is in the PD targets only): the squeeze slams the hands shut and squirts the object out. After a reference
+    # start the object is held at its reference pose while the grasp loads, the hold fading linearly to none over
+    # this many frames (0: off). Stand and PSI starts never settle.
+    grip_settle_frames: int = 0
 
 
 @dataclass

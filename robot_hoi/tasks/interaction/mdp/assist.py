@@ -15,7 +15,8 @@ from robot_hoi.utils.torch_rot import quat_conj, quat_mul, quat_to_rotvec
 
 
 def pd_wrench(pos: Tensor, quat: Tensor, lin_vel: Tensor, ang_vel: Tensor, ref_pos: Tensor, ref_quat: Tensor,
-              ref_lin_vel: Tensor, ref_ang_vel: Tensor, kp: float, kd: float, kp_rot: float, kd_rot: float) -> Tensor:
+              ref_lin_vel: Tensor, ref_ang_vel: Tensor, kp: float | Tensor, kd: float | Tensor, kp_rot: float | Tensor,
+              kd_rot: float | Tensor) -> Tensor:
     """(N, 6) world force and torque toward a reference pose and velocity (all world frame, quaternions wxyz)."""
     force = kp * (ref_pos - pos) + kd * (ref_lin_vel - lin_vel)
     torque = kp_rot * quat_to_rotvec(quat_mul(ref_quat, quat_conj(quat))) + kd_rot * (ref_ang_vel - ang_vel)
@@ -43,6 +44,24 @@ def assist_wrench(env, level: float) -> Tensor:
     obj[:, 2] += level * cfg.object_gravity_share * env.object_mass * 9.81  # carry part of the object's weight
     wrench[:, env.scene.object_body_id()] = obj
     return wrench * env.assisted[:, None, None]  # only the episodes drawn to be assisted
+
+
+def grip_settle_wrench(env, omega: float = 20.0) -> Tensor:
+    """(N, nbody, 6) after a reference start, the object held at its reference pose (weight carried, critically
+    damped PD at `omega` rad/s) while the grasp loads: full on the first step, fading linearly to none over
+    `init.grip_settle_frames` (state initialisation, not the curriculum: it runs at every assist level, also 0)."""
+    wrench = torch.zeros(env.num_envs, env.scene.model.nbody, 6, device=env.device)
+    body = env.scene.object_body_id()
+    mass = env.object_mass[:, None]
+    inertia = float(env.scene.model.body_inertia[body].mean())
+    hold = pd_wrench(env.object_pos, env.object_quat, env.object_lin_vel, env.object_ang_vel, env.ref.object_pos,
+                     env.ref.object_quat_wxyz, env.ref_object_lin_vel[env.ref_index],
+                     env.ref_object_ang_vel[env.ref_index], mass * omega**2, mass * 2 * omega, inertia * omega**2,
+                     inertia * 2 * omega)
+    hold[:, 2] += env.object_mass * 9.81
+    share = env.grip_settle_left.float() / max(env.cfg.init.grip_settle_frames, 1)
+    wrench[:, body] = share[:, None] * hold
+    return wrench
 
 
 def assist_level(cfg, total_samples: int) -> float:
