@@ -53,7 +53,7 @@ def grip_settle_wrench(env, omega: float = 20.0) -> Tensor:
     wrench = torch.zeros(env.num_envs, env.scene.model.nbody, 6, device=env.device)
     body = env.scene.object_body_id()
     mass = env.object_mass[:, None]
-    inertia = float(env.scene.model.body_inertia[body].mean())
+    inertia = float(env.scene.model.body_inertia[body].mean()) * mass / env.scene.object_mass  # scales with mass
     hold = pd_wrench(env.object_pos, env.object_quat, env.object_lin_vel, env.object_ang_vel, env.ref.object_pos,
                      env.ref.object_quat_wxyz, env.ref_object_lin_vel[env.ref_index],
                      env.ref_object_ang_vel[env.ref_index], mass * omega**2, mass * 2 * omega, inertia * omega**2,
