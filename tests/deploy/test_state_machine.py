@@ -155,3 +155,12 @@ def test_stop_request_ends_through_damp(dev_policy):
     assert summary["exit_reason"].startswith("operator stop")
     assert summary["phase_time_s"]["DAMP"] == pytest.approx(rig.safety.damp_s, abs=rig.dt)
     assert rig.clock.now() < 1000.0 + 2.0
+
+
+def test_hands_exchanged_once_per_tick_through_every_phase(rig):
+    """At the planned rate (every tick here) each hand gets one exchange per control tick, policy phase included; the
+    real-time dry run only checks it loosely, since a starved hand thread lags there."""
+    ticks = rig.run_until(Phase.POLICY) + 30
+    rig.step(30)
+    stats = rig.hands.stats()
+    assert stats["left"]["cycles"] == ticks and stats["right"]["cycles"] == ticks
