@@ -111,20 +111,37 @@ def prune_checkpoints(directory: Path, keep_last: int | None, pattern: str = "mo
         old.unlink(missing_ok=True)
 
 
-def resolve_checkpoint(path: str | Path) -> Path:
-    """A checkpoint file as given, or the latest checkpoint of a group folder, or of the one group of a run folder
-    that holds checkpoints (model_final.pt, else the highest iteration)."""
-    from robot_hoi.rl.teacher_job import latest_checkpoint
+BEST_CHECKPOINT = "model_best.pt"  # the in-training evaluation's best policy (runner.eval_interval)
 
+
+def latest_checkpoint(folder: Path) -> Path | None:
+    """model_final.pt, else the model_<it>.pt with the highest iteration: where training resumes."""
+    final = folder / "model_final.pt"
+    if final.exists():
+        return final
+    numbered = [(int(p.stem.split("_")[-1]), p) for p in folder.glob("model_*.pt") if p.stem.split("_")[-1].isdigit()]
+    return max(numbered)[1] if numbered else None
+
+
+def policy_checkpoint(folder: Path) -> Path | None:
+    """The policy a finished run stands for: the in-training evaluation's best when there is one, else the latest.
+    (PPO's checkpoints can alternate between completing a clip and not; the best is the one to use.)"""
+    best = folder / BEST_CHECKPOINT
+    return best if best.exists() else latest_checkpoint(folder)
+
+
+def resolve_checkpoint(path: str | Path) -> Path:
+    """A checkpoint file as given, or the policy checkpoint of a group folder, or of the one group of a run folder
+    that holds checkpoints (model_best.pt, else model_final.pt, else the highest iteration)."""
     path = Path(path)
     if path.is_file():
         return path
     if not path.is_dir():
         raise UserError(f"{path}: no such checkpoint or run folder")
-    found = latest_checkpoint(path)
+    found = policy_checkpoint(path)
     if found is not None:
         return found
-    groups = {sub.name: latest_checkpoint(sub) for sub in sorted(path.iterdir()) if sub.is_dir()}
+    groups = {sub.name: policy_checkpoint(sub) for sub in sorted(path.iterdir()) if sub.is_dir()}
     groups = {name: ckpt for name, ckpt in groups.items() if ckpt is not None}
     if len(groups) == 1:
         return next(iter(groups.values()))

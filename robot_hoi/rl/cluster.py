@@ -40,10 +40,10 @@ from pathlib import Path
 from typing import Any
 
 from robot_hoi.errors import UserError
+from robot_hoi.rl.checkpoint import latest_checkpoint
 from robot_hoi.rl.teacher_job import (
     TeacherJob,
     format_line,
-    latest_checkpoint,
     read_job_state,
     train_teacher_group,
 )

@@ -99,8 +99,16 @@ class RunnerConfig:
     # rollout keeps --torch-threads (1: its 64-row ops lose more to hand-offs than they gain). Measured (2 vCPU,
     # fast preset, 3072 samples x 5 epochs): 1 thread 663 ms, 2 threads 409 ms per update.
     update_threads: int | None = None
+    # In-training evaluation (0: off): every eval_interval iterations the run's evaluator (robot-hoi train's: the
+    # eval protocol from the stand, with the training's spawn noise) scores the policy mean on eval_episodes
+    # episodes. Eval/* scalars and eval_curve.jsonl record it against training time, and the best so far (success,
+    # then tracked duration) is kept as model_best.pt: the policy `eval`, `export` and distillation take from a run.
+    eval_interval: int = 500
+    eval_episodes: int = 16
 
     def __post_init__(self) -> None:
+        if self.eval_interval < 0 or self.eval_episodes <= 0:
+            raise ValueError("eval_interval must be >= 0 (0: off) and eval_episodes positive")
         if not self.actor_obs_groups or not self.critic_obs_groups:
             raise ValueError("actor_obs_groups and critic_obs_groups must name at least one group")
         if self.save_interval <= 0 or self.episode_window <= 0 or self.physics_check_interval <= 0:

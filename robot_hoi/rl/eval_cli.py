@@ -88,9 +88,9 @@ def run(args: argparse.Namespace) -> int:
         results[clip.name] = evaluate(env, model.to(env.device))
     summary = summarise(results)
     if args.json:
-        print(json.dumps({"checkpoint": args.checkpoint, "clips": results, "mean": summary}, indent=2))
+        print(json.dumps({"checkpoint": str(ckpt or args.checkpoint), "clips": results, "mean": summary}, indent=2))
     else:
-        _print_table(args.checkpoint, results, summary)
+        _print_table(str(ckpt or args.checkpoint), results, summary)
     return 0
 
 

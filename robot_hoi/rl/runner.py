@@ -5,7 +5,8 @@
     runner.resume("runs/teacher_sub2/model_1500.pt"); runner.learn(parse_budget("1h"))
 
 Run folder: model_<iteration>.pt checkpoints, scalars.jsonl (every logged scalar, one line per iteration),
-TensorBoard events, run_info.json (resolved config, obs layout, git commit) and git.diff.
+TensorBoard events, run_info.json (resolved config, obs layout, git commit) and git.diff. With an evaluator and
+runner.eval_interval: eval_curve.jsonl (one row per evaluation) and model_best.pt.
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ from torch import Tensor
 from robot_hoi.errors import UserError
 from robot_hoi.rl.budget import Budget
 from robot_hoi.rl.checkpoint import (
+    BEST_CHECKPOINT,
     git_state,
     load_model_state,
     prune_checkpoints,
@@ -39,6 +41,8 @@ from robot_hoi.rl.progress import progress_text, training_progress
 from robot_hoi.rl.step_log import StepLog
 from robot_hoi.utils.atomic import atomic_write_text
 from robot_hoi.utils.timing import OFF
+
+EVAL_CURVE_FILE = "eval_curve.jsonl"
 
 _PPO_SCALARS = {
     "surrogate_loss": "Loss/surrogate",
@@ -82,6 +86,10 @@ class OnPolicyRunner:
         self.device = torch.device(device)
         self.log_dir = Path(log_dir) if log_dir is not None else None
         self.on_checkpoint: Callable[[Path], None] | None = None  # after each periodic save (Ray mirroring)
+        # policy (eval mode) -> metrics with success_rate and duration_s; run every runner.eval_interval iterations
+        self.evaluator: Callable[[ActorCritic], dict[str, float]] | None = None
+        self.on_evaluation: Callable[[dict[str, Any]], None] | None = None  # after each evaluation, with its row
+        self.best_eval: dict[str, Any] | None = None  # the row of model_best.pt
         # a robot_hoi.utils.timing.Timers (shared with the env) splits the loop's wall time into stages
         self.timers = OFF
         torch.manual_seed(cfg.seed)
@@ -196,6 +204,9 @@ class OnPolicyRunner:
             if self.iteration % self.cfg.runner.save_interval == 0:
                 self._save_periodic()
                 last_saved = self.iteration
+            if self.evaluator is not None and self.cfg.runner.eval_interval and \
+                    self.iteration % self.cfg.runner.eval_interval == 0:
+                self.evaluate_and_keep_best()
             elapsed = time.monotonic() - start
             progress.update(
                 task,
@@ -206,6 +217,31 @@ class OnPolicyRunner:
             if budget.exhausted(elapsed, samples, iterations):
                 break
         return last_saved
+
+    def evaluate_and_keep_best(self) -> dict[str, Any]:
+        """Score the current policy with the evaluator; log it, and save it as model_best.pt when it beats the best
+        so far (higher success, then longer tracked duration). Returns the curve row."""
+        started = time.monotonic()
+        self.model.eval()
+        try:
+            metrics = self.evaluator(self.model)
+        finally:
+            self.model.train()
+        row = {"step": self.iteration, "samples": self.total_samples, "train_time_s": round(self.total_time_s, 1),
+               "eval_s": round(time.monotonic() - started, 2), **metrics}
+        row["best"] = self.best_eval is None or _eval_rank(metrics) > _eval_rank(self.best_eval)
+        if row["best"]:
+            self.best_eval = row
+            if self.log_dir is not None:
+                self.save(self.log_dir / BEST_CHECKPOINT, extra={"eval": row})
+        if self.log_dir is not None:  # an append-only log like scalars.jsonl (trimmed the same way on resume)
+            with (self.log_dir / EVAL_CURVE_FILE).open("a", encoding="utf-8") as curve:
+                curve.write(json.dumps(row) + "\n")
+        self.logger.log_scalars({f"Eval/{k}": float(v) for k, v in metrics.items()
+                                 if isinstance(v, (int, float)) and not isinstance(v, bool)}, self.iteration)
+        if self.on_evaluation is not None:
+            self.on_evaluation(row)
+        return row
 
     def _update_curriculum(self) -> dict[str, float]:
         """Envs with a training curriculum (e.g. assist wrenches) follow the samples trained so far."""
@@ -316,11 +352,11 @@ class OnPolicyRunner:
         if self.on_checkpoint is not None:
             self.on_checkpoint(path)
 
-    def save(self, path: str | Path) -> Path:
+    def save(self, path: str | Path, extra: dict[str, Any] | None = None) -> Path:
         git = self._git()
         return save_checkpoint(
             path,
-            {
+            (extra or {}) | {
                 "model": self.model.state_dict(),
                 "optimizer": self.alg.optimizer_state(),
                 "iteration": self.iteration,
@@ -391,6 +427,14 @@ class OnPolicyRunner:
         rng = data.get("torch_rng_state")
         if isinstance(rng, Tensor):
             torch.set_rng_state(rng.cpu())
+        best = self.log_dir / BEST_CHECKPOINT if self.log_dir is not None else None
+        if best is not None and best.exists():  # later evaluations must beat the run's best, not start over
+            self.best_eval = read_checkpoint(best).get("eval")
 
     def close(self) -> None:
         self.logger.close()
+
+
+def _eval_rank(metrics: dict[str, Any]) -> tuple[float, float]:
+    """Which evaluation is better: success first, then how long the clip was tracked."""
+    return float(metrics["success_rate"]), float(metrics["duration_s"])

@@ -9,7 +9,8 @@ Group folder (beside the runner's checkpoints and logs):
                    started from. A retry of the same invocation (same token: a Ray task re-run after a crash or
                    pre-emption) resumes from the latest checkpoint and trains only the budget left; a new
                    invocation starts afresh, or with `--resume` continues with a fresh budget.
-  eval.json        InterMimic's metrics of the final policy (robot_hoi.rl.eval_cli.evaluate), per clip and mean.
+  eval.json        InterMimic's metrics of the final policy (robot_hoi.rl.eval_cli.evaluate), per clip and mean;
+                   under "best", the same for model_best.pt (the in-training evaluation's pick, runner.eval_interval).
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ from pathlib import Path
 from typing import Any
 
 from robot_hoi.rl.budget import Budget
+from robot_hoi.rl.checkpoint import latest_checkpoint
 from robot_hoi.utils.atomic import atomic_write_text
 
 JOB_STATE_FILE = "job_state.json"
@@ -66,16 +68,6 @@ class TeacherJob:
         return replace(self, run_dir=str(run_dir))
 
 
-def latest_checkpoint(run_dir: Path) -> Path | None:
-    """model_final.pt, else the model_<it>.pt with the highest iteration."""
-    final = run_dir / "model_final.pt"
-    if final.exists():
-        return final
-    numbered = [(int(p.stem.split("_")[-1]), p) for p in run_dir.glob("model_*.pt")
-                if p.stem.split("_")[-1].isdigit()]
-    return max(numbered)[1] if numbered else None
-
-
 def read_job_state(run_dir: Path) -> dict | None:
     path = Path(run_dir) / JOB_STATE_FILE
     try:
@@ -109,8 +101,8 @@ def train_teacher_group(job: TeacherJob, clips: list | None = None, log=print,
     import torch
 
     from robot_hoi.embodiment import load_embodiment
-    from robot_hoi.rl.checkpoint import read_checkpoint
-    from robot_hoi.rl.runner import OnPolicyRunner
+    from robot_hoi.rl.checkpoint import BEST_CHECKPOINT, load_model_state, read_checkpoint
+    from robot_hoi.rl.runner import EVAL_CURVE_FILE, OnPolicyRunner
     from robot_hoi.sim.device import check_gpu_memory, policy_device, resolve_env_cfg
     from robot_hoi.tasks.interaction import factory
 
@@ -132,7 +124,8 @@ def train_teacher_group(job: TeacherJob, clips: list | None = None, log=print,
             f"from {latest.name})")
     if resume_from is not None:
         # Rows logged after that checkpoint are re-trained now; drop them so the log has each iteration once.
-        _trim_scalars(run_dir / SCALARS_FILE, int(read_checkpoint(resume_from)["iteration"]))
+        for log_file in (SCALARS_FILE, EVAL_CURVE_FILE):
+            _trim_scalars(run_dir / log_file, int(read_checkpoint(resume_from)["iteration"]))
 
     torch.manual_seed(job.train_cfg.seed)
     # The physics device, chosen once in this process (a Ray worker: its own GPU); training and evaluation envs
@@ -142,6 +135,12 @@ def train_teacher_group(job: TeacherJob, clips: list | None = None, log=print,
     env = factory.make_env(clips, env_cfg, embodiment, cache=run_dir / "references")
     runner = OnPolicyRunner(env, job.train_cfg, run_dir, device=policy_device(job.device, env.device))
     runner.on_checkpoint = on_checkpoint
+    if job.train_cfg.runner.eval_interval:
+        runner.evaluator = in_training_evaluator(clips, job, env_cfg, embodiment, run_dir / "references")
+        runner.on_evaluation = lambda row: log(
+            f"[{job.group}] eval at it {row['step']} ({row['train_time_s'] / 60:.1f} min): success "
+            f"{row['success_rate']:.2f}, duration {row['duration_s']:.2f} s, E_h {row['E_h_cm']:.1f} cm, E_o "
+            f"{row['E_o_cm']:.1f} cm{' (best so far: model_best.pt)' if row['best'] else ''}")
     resumed_from = None
     if resume_from is not None:
         runner.resume(resume_from)
@@ -175,6 +174,14 @@ def train_teacher_group(job: TeacherJob, clips: list | None = None, log=print,
     evaluation = evaluate_group(runner.model.eval(), clips, job, env_cfg, embodiment, run_dir / "references")
     evaluation.update(group=job.group, checkpoint=checkpoint.name if checkpoint else None,
                       iteration=runner.iteration)
+    best = run_dir / BEST_CHECKPOINT
+    if best.exists():  # the policy the run stands for (checkpoint.policy_checkpoint), by the same protocol
+        best_data = read_checkpoint(best)
+        load_model_state(runner.model, best_data["model"], best)
+        evaluation["best"] = evaluate_group(runner.model.eval(), clips, job, env_cfg, embodiment,
+                                            run_dir / "references")
+        evaluation["best"].update(checkpoint=best.name, iteration=int(best_data["iteration"]),
+                                  selected_by=best_data.get("eval"))
     atomic_write_text(run_dir / EVAL_FILE, json.dumps(evaluation, indent=2) + "\n")
     return {
         "group": job.group,
@@ -187,6 +194,8 @@ def train_teacher_group(job: TeacherJob, clips: list | None = None, log=print,
         "resumed_from": resumed_from,
         "checkpoint": evaluation["checkpoint"],
         "eval": evaluation["mean"],
+        "best": {"iteration": evaluation["best"]["iteration"], **evaluation["best"]["mean"]} if "best" in evaluation
+        else None,
         "host": socket.gethostname(),
         "run_dir": str(run_dir),
     }
@@ -205,6 +214,28 @@ def evaluate_group(model, clips: list, job: TeacherJob, env_cfg, embodiment, cac
         results[clip.name] = evaluate(factory.make_env([clip], cfg, embodiment, cache=cache), model)
     return {"episodes_per_clip": job.eval_episodes, "seed": job.eval_seed, "clips": results,
             "mean": summarise(results)}
+
+
+def in_training_evaluator(clips: list, job: TeacherJob, env_cfg, embodiment, cache: Path):
+    """The runner's periodic evaluation: the eval protocol (stand starts, policy mean) with the training's stand
+    spawn noise, so a checkpoint that completes the clip only from the exact stand does not win. The envs are built
+    once and re-seeded each time: every checkpoint meets the same starts."""
+    from robot_hoi.rl.eval_cli import evaluate, evaluation_settings, summarise
+    from robot_hoi.tasks.interaction import factory
+
+    cfg = copy.deepcopy(env_cfg)
+    evaluation_settings(cfg, job.train_cfg.runner.eval_episodes, job.eval_seed)
+    cfg.init.spawn_noise_xy = env_cfg.init.spawn_noise_xy
+    envs = {clip.name: factory.make_env([clip], cfg, embodiment, cache=cache) for clip in clips}
+
+    def run(model) -> dict[str, Any]:
+        results = {}
+        for name, env in envs.items():
+            env.generator.manual_seed(job.eval_seed)
+            results[name] = evaluate(env, model)
+        return summarise(results)
+
+    return run
 
 
 def _finite_or_none(value: float) -> float | None:
@@ -251,7 +282,14 @@ def format_line(summary: dict[str, Any]) -> str:
     return (f"{summary['group']}: it {summary['iteration']}{resumed}, return {_number(summary['mean_return'])}, "
             f"success {ev['success_rate']:.2f} (interaction {ev.get('interaction_success_rate', float('nan')):.2f}), "
             f"E_h {ev['E_h_cm']:.1f} cm, E_o {ev['E_o_cm']:.1f} cm, "
-            f"{summary['wall_s']:.0f} s on {summary['host']}")
+            f"{summary['wall_s']:.0f} s on {summary['host']}{_best_text(summary.get('best'))}")
+
+
+def _best_text(best: dict | None) -> str:
+    if best is None:
+        return ""
+    return (f"; model_best.pt (it {best['iteration']}): success {best['success_rate']:.2f}, "
+            f"{best['duration_s']:.2f} s tracked")
 
 
 def _number(value: float | None) -> str:

@@ -22,7 +22,8 @@ from robot_hoi.rl.runner import OnPolicyRunner
 from robot_hoi.student.height_map import HeightMap
 from robot_hoi.student.student_env import StudentEnv
 from robot_hoi.student.task import evaluation_cfg
-from robot_hoi.student.teachers import TeacherMember, TeacherRun, latest_checkpoint
+from robot_hoi.rl.checkpoint import policy_checkpoint
+from robot_hoi.student.teachers import TeacherMember, TeacherRun
 from robot_hoi.tasks.interaction import factory
 from robot_hoi.utils.atomic import atomic_write_text
 
@@ -68,7 +69,7 @@ def train_expert(setup, run: TeacherRun, clip_ids: list[int], kind: str, budget,
         train_cfg.runner.actor_obs_groups = [*run.train_cfg.runner.actor_obs_groups, "height_map"]
         train_cfg.runner.critic_obs_groups = [*run.train_cfg.runner.critic_obs_groups, "height_map"]
     wrapped = StudentEnv(env, providers)
-    existing = latest_checkpoint(folder)
+    existing = policy_checkpoint(folder)
     if existing is not None:  # loaded without a log folder: reusing an expert writes nothing
         runner = OnPolicyRunner(wrapped, train_cfg, None, device=setup.device)
         runner.load(existing)
@@ -88,7 +89,7 @@ def train_expert(setup, run: TeacherRun, clip_ids: list[int], kind: str, budget,
         print(f"[complexmimic] fine-tuning the {kind} expert of {run.name} "
               f"(tau {env_cfg.terminations.max_mean_link_error}, budget {budget.describe()})")
         runner.learn(budget)
-        existing = latest_checkpoint(folder)
+        existing = policy_checkpoint(folder)
     runner.close()
     return TeacherMember(f"{run.name}/{kind}", runner.model.eval(), existing,
                          tuple(train_cfg.runner.actor_obs_groups), run.action_offset,

@@ -294,7 +294,7 @@ def run(args: argparse.Namespace) -> int:
 def train(args: argparse.Namespace, rank: Rank | None = None) -> dict:
     """Train the student in this process (as `rank` of a data-parallel group, or alone); rank 0 evaluates it.
     Returns this rank's report: samples it collected, the run's total, its parameter checksum, what it saved."""
-    from robot_hoi.student.teachers import latest_checkpoint
+    from robot_hoi.rl.checkpoint import latest_checkpoint
 
     rank = rank or Rank()
     setup, budget = prepare_run(args, rank)

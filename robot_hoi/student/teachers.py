@@ -17,6 +17,7 @@ import torch
 from torch import Tensor
 
 from robot_hoi.errors import UserError
+from robot_hoi.rl.checkpoint import policy_checkpoint
 from robot_hoi.rl.config import TrainConfig
 from robot_hoi.rl.models import ActorCritic
 from robot_hoi.sim.device import module_device
@@ -54,15 +55,6 @@ class TeacherRun:
         return self.env.get("action_offset", "default")  # tasks written before the option had absolute targets
 
 
-def latest_checkpoint(folder: Path) -> Path | None:
-    """model_final.pt, else the model_<it>.pt with the highest iteration."""
-    final = folder / "model_final.pt"
-    if final.exists():
-        return final
-    numbered = [(int(p.stem.split("_")[-1]), p) for p in folder.glob("model_*.pt") if p.stem.split("_")[-1].isdigit()]
-    return max(numbered)[1] if numbered else None
-
-
 def teacher_folders(run_dir: Path) -> list[Path]:
     run_dir = Path(run_dir)
     if not run_dir.is_dir():
@@ -82,7 +74,7 @@ def load_teacher_runs(run_dir: str | Path) -> list[TeacherRun]:
 
     runs = []
     for folder in teacher_folders(Path(run_dir)):
-        ckpt = latest_checkpoint(folder)
+        ckpt = policy_checkpoint(folder)
         if ckpt is None:
             raise UserError(f"{folder}: no model_*.pt checkpoint; train the teacher first")
         try:

@@ -57,6 +57,17 @@ def test_run_folders_resolve_to_their_latest_checkpoint(tmp_path):
         resolve_checkpoint(tmp_path / "run")
 
 
+def test_a_folder_with_a_best_checkpoint_resolves_to_it_but_resumes_from_the_latest(tmp_path):
+    from robot_hoi.rl.checkpoint import latest_checkpoint, policy_checkpoint
+
+    for it in (25, 50):
+        (tmp_path / f"model_{it}.pt").write_bytes(b"")
+    (tmp_path / "model_best.pt").write_bytes(b"")
+    assert resolve_checkpoint(tmp_path) == tmp_path / "model_best.pt"
+    assert policy_checkpoint(tmp_path) == tmp_path / "model_best.pt"
+    assert latest_checkpoint(tmp_path) == tmp_path / "model_50.pt"
+
+
 def test_export_without_a_checkpoint_does_not_pick_one(tmp_path, capsys, monkeypatch):
     monkeypatch.chdir(tmp_path)
     (tmp_path / "runs" / "r" / "g").mkdir(parents=True)

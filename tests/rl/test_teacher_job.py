@@ -112,3 +112,24 @@ def test_teachers_start_from_the_shipped_base_policy_unless_told(tmp_path, monke
     assert base_policy_init("none", "g1_inspire") is None
     with pytest.raises(UserError, match="no such checkpoint"):
         base_policy_init(str(tmp_path / "missing.pt"), "g1_inspire")
+
+
+def test_in_training_evaluation_writes_a_curve_and_the_run_stands_for_its_best(job, tmp_path):
+    from robot_hoi.rl.checkpoint import read_checkpoint, resolve_checkpoint
+    from robot_hoi.rl.runner import EVAL_CURVE_FILE
+
+    logs = []
+    job = replace(job, train_cfg=replace(job.train_cfg, runner=replace(job.train_cfg.runner, eval_interval=1,
+                                                                       eval_episodes=2)))
+    train_teacher_group(job, log=logs.append)
+    folder = tmp_path / "push"
+    rows = [json.loads(line) for line in (folder / EVAL_CURVE_FILE).read_text().splitlines()]
+    assert [r["step"] for r in rows] == [1, 2] and rows[0]["best"]
+    assert all(r["duration_s"] > 0.0 and r["E_h_cm"] > 0.0 for r in rows)  # episodes of the real env were run
+    assert sum("eval at it" in line for line in logs) == 2
+    best_row = [r for r in rows if r["best"]][-1]
+    assert read_checkpoint(folder / "model_best.pt")["iteration"] == best_row["step"]
+    assert resolve_checkpoint(folder) == folder / "model_best.pt"
+    evaluation = json.loads((folder / EVAL_FILE).read_text())
+    assert evaluation["best"]["iteration"] == best_row["step"] and evaluation["best"]["checkpoint"] == "model_best.pt"
+    assert evaluation["best"]["clips"]["synth_push_seed0"]["episodes"] == 2

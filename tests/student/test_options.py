@@ -13,7 +13,7 @@ from robot_hoi.student.config import (
     load_student_config,
     option_overrides,
 )
-from robot_hoi.student.teachers import latest_checkpoint
+from robot_hoi.rl.checkpoint import latest_checkpoint
 
 from .conftest import student_args
 
