@@ -129,6 +129,24 @@ def test_failure_weighted_starts_follow_the_terminations(scene):
     assert ((frames >= 29) & (frames <= 31)).float().mean().item() < 0.15
 
 
+def test_failure_counts_fade_with_their_half_life_when_asked(scene):
+    env = _env(scene)
+    terminated = torch.ones(2, dtype=torch.bool)
+    fade = 0.5 ** (2 / 20)  # per step of 2 samples, at a half-life of 20 samples
+    faded = 2 * (1 - fade ** 50) / (1 - fade) * fade ** 50  # counted over 50 steps, then faded over 50 more
+    for half_life, early_left in ((0.0, 100.0), (20.0, faded)):
+        env.cfg.init.failure_half_life_samples = half_life
+        env.failure_counts.zero_()
+        env.ref_index[:] = env.clip_start[0] + 30  # segment 15: where episodes used to end
+        for _ in range(50):
+            env._count_failures(terminated)
+        env.ref_index[:] = env.clip_start[0] + 10  # segment 5: where they end now, for 50 steps of 2 samples
+        for _ in range(50):
+            env._count_failures(terminated)
+        assert env.failure_counts[0, 15].item() == pytest.approx(early_left, rel=1e-4)
+    assert env.failure_counts[0, 5] > 10 * env.failure_counts[0, 15]
+
+
 def test_only_the_episodes_drawn_to_be_assisted_get_wrenches(scene):
     from robot_hoi.tasks.interaction.mdp.assist import assist_wrench
 

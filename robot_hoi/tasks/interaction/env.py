@@ -478,6 +478,9 @@ class InteractionEnv:
         span = (self.clip_end[clip] - self.clip_start[clip]).clamp(min=1).float()
         segments = self.failure_counts.shape[1]
         segment = ((self.ref_index - self.clip_start[clip]).float() / span * segments).long().clamp(0, segments - 1)
+        half_life = self.cfg.init.failure_half_life_samples
+        if half_life > 0:  # one env step is num_envs samples
+            self.failure_counts.mul_(0.5 ** (self.num_envs / half_life))
         self.failure_counts.index_put_((clip, segment), terminated.float(), accumulate=True)
 
     def _reference_states(self, frames: Tensor) -> Tensor:

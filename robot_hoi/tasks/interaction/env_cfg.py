@@ -53,6 +53,10 @@ class InitCfg:
     # that segment), so training spends its samples where episodes end (BeyondMimic's adaptive sampling).
     failure_weighted: bool = False
     failure_segments: int = 20
+    # Samples over which a counted termination loses half its weight (0: counts never fade). Without fading, early
+    # failures (e.g. a walk-up that is long since learnt) keep their weight for the whole run. Not yet measured in a
+    # learning run: the default keeps today's measured behaviour.
+    failure_half_life_samples: float = 0.0
     # A reference state holds the object with no grip force (the hands rest ~1 cm off the hull; the grasp squeeze
     # is in the PD targets only): the squeeze slams the hands shut and squirts the object out. After a reference
     # start the object is held at its reference pose while the grasp loads, the hold fading linearly to none over
