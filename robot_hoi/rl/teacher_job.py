@@ -102,6 +102,7 @@ def train_teacher_group(job: TeacherJob, clips: list | None = None, log=print,
 
     from robot_hoi.embodiment import load_embodiment
     from robot_hoi.rl.checkpoint import BEST_CHECKPOINT, load_model_state, read_checkpoint
+    from robot_hoi.rl.eval_cli import summarise
     from robot_hoi.rl.runner import EVAL_CURVE_FILE, OnPolicyRunner
     from robot_hoi.sim.device import check_gpu_memory, policy_device, resolve_env_cfg
     from robot_hoi.tasks.interaction import factory
@@ -124,8 +125,9 @@ def train_teacher_group(job: TeacherJob, clips: list | None = None, log=print,
             f"from {latest.name})")
     if resume_from is not None:
         # Rows logged after that checkpoint are re-trained now; drop them so the log has each iteration once.
+        resumed_iteration = int(read_checkpoint(resume_from)["iteration"])
         for log_file in (SCALARS_FILE, EVAL_CURVE_FILE):
-            _trim_scalars(run_dir / log_file, int(read_checkpoint(resume_from)["iteration"]))
+            _trim_log(run_dir / log_file, resumed_iteration)
 
     torch.manual_seed(job.train_cfg.seed)
     # The physics device, chosen once in this process (a Ray worker: its own GPU); training and evaluation envs
@@ -136,7 +138,11 @@ def train_teacher_group(job: TeacherJob, clips: list | None = None, log=print,
     runner = OnPolicyRunner(env, job.train_cfg, run_dir, device=policy_device(job.device, env.device))
     runner.on_checkpoint = on_checkpoint
     if job.train_cfg.runner.eval_interval:
-        runner.evaluator = in_training_evaluator(clips, job, env_cfg, embodiment, run_dir / "references")
+        # the eval protocol with the training's stand spawn noise, so a policy that completes the clip only from the
+        # exact stand does not win; envs built once and re-seeded: every checkpoint meets the same starts
+        noisy = evaluation_envs(clips, env_cfg, embodiment, run_dir / "references", job.train_cfg.runner.eval_episodes,
+                                job.eval_seed, spawn_noise_xy=env_cfg.init.spawn_noise_xy)
+        runner.evaluator = lambda model: summarise(evaluate_envs(noisy, model, job.eval_seed))
         runner.on_evaluation = lambda row: log(
             f"[{job.group}] eval at it {row['step']} ({row['train_time_s'] / 60:.1f} min): success "
             f"{row['success_rate']:.2f}, duration {row['duration_s']:.2f} s, E_h {row['E_h_cm']:.1f} cm, E_o "
@@ -171,15 +177,16 @@ def train_teacher_group(job: TeacherJob, clips: list | None = None, log=print,
     checkpoint = run_dir / f"model_{runner.iteration}.pt"  # learn() always ends with this one
     checkpoint = checkpoint if checkpoint.exists() else latest_checkpoint(run_dir)
 
-    evaluation = evaluate_group(runner.model.eval(), clips, job, env_cfg, embodiment, run_dir / "references")
+    # eval_cli's evaluation (stand starts, policy mean, no noise) in envs of the training env's (resolved) config
+    envs = evaluation_envs(clips, env_cfg, embodiment, run_dir / "references", job.eval_episodes, job.eval_seed)
+    evaluation = _evaluation_record(evaluate_envs(envs, runner.model.eval(), job.eval_seed), job)
     evaluation.update(group=job.group, checkpoint=checkpoint.name if checkpoint else None,
                       iteration=runner.iteration)
     best = run_dir / BEST_CHECKPOINT
     if best.exists():  # the policy the run stands for (checkpoint.policy_checkpoint), by the same protocol
         best_data = read_checkpoint(best)
         load_model_state(runner.model, best_data["model"], best)
-        evaluation["best"] = evaluate_group(runner.model.eval(), clips, job, env_cfg, embodiment,
-                                            run_dir / "references")
+        evaluation["best"] = _evaluation_record(evaluate_envs(envs, runner.model.eval(), job.eval_seed), job)
         evaluation["best"].update(checkpoint=best.name, iteration=int(best_data["iteration"]),
                                   selected_by=best_data.get("eval"))
     atomic_write_text(run_dir / EVAL_FILE, json.dumps(evaluation, indent=2) + "\n")
@@ -201,48 +208,43 @@ def train_teacher_group(job: TeacherJob, clips: list | None = None, log=print,
     }
 
 
-def evaluate_group(model, clips: list, job: TeacherJob, env_cfg, embodiment, cache: Path) -> dict[str, Any]:
-    """eval_cli's evaluation (stand starts, policy mean, no noise) on each clip of the group, in envs of the
-    training env's (resolved) config: where the model is."""
-    from robot_hoi.rl.eval_cli import evaluate, evaluation_settings, summarise
-    from robot_hoi.tasks.interaction import factory
-
-    results = {}
-    for clip in clips:
-        cfg = copy.deepcopy(env_cfg)
-        evaluation_settings(cfg, job.eval_episodes, job.eval_seed)
-        results[clip.name] = evaluate(factory.make_env([clip], cfg, embodiment, cache=cache), model)
-    return {"episodes_per_clip": job.eval_episodes, "seed": job.eval_seed, "clips": results,
-            "mean": summarise(results)}
-
-
-def in_training_evaluator(clips: list, job: TeacherJob, env_cfg, embodiment, cache: Path):
-    """The runner's periodic evaluation: the eval protocol (stand starts, policy mean) with the training's stand
-    spawn noise, so a checkpoint that completes the clip only from the exact stand does not win. The envs are built
-    once and re-seeded each time: every checkpoint meets the same starts."""
-    from robot_hoi.rl.eval_cli import evaluate, evaluation_settings, summarise
+def evaluation_envs(clips: list, env_cfg, embodiment, cache: Path, episodes: int, seed: int,
+                    spawn_noise_xy: float = 0.0) -> dict[str, Any]:
+    """One eval-protocol env per clip (eval_cli.evaluation_settings: stand starts, no noise but the given stand
+    spawn noise), from the training env's (resolved) config: where the model is."""
+    from robot_hoi.rl.eval_cli import evaluation_settings
     from robot_hoi.tasks.interaction import factory
 
     cfg = copy.deepcopy(env_cfg)
-    evaluation_settings(cfg, job.train_cfg.runner.eval_episodes, job.eval_seed)
-    cfg.init.spawn_noise_xy = env_cfg.init.spawn_noise_xy
-    envs = {clip.name: factory.make_env([clip], cfg, embodiment, cache=cache) for clip in clips}
+    evaluation_settings(cfg, episodes, seed)
+    cfg.init.spawn_noise_xy = spawn_noise_xy
+    return {clip.name: factory.make_env([clip], cfg, embodiment, cache=cache) for clip in clips}
 
-    def run(model) -> dict[str, Any]:
-        results = {}
-        for name, env in envs.items():
-            env.generator.manual_seed(job.eval_seed)
-            results[name] = evaluate(env, model)
-        return summarise(results)
 
-    return run
+def evaluate_envs(envs: dict[str, Any], model, seed: int) -> dict[str, dict]:
+    """eval_cli.evaluate on each env, its generator re-seeded first: reused envs give every policy the same starts."""
+    from robot_hoi.rl.eval_cli import evaluate
+
+    results = {}
+    for name, env in envs.items():
+        env.generator.manual_seed(seed)
+        results[name] = evaluate(env, model)
+    return results
+
+
+def _evaluation_record(results: dict[str, dict], job: TeacherJob) -> dict[str, Any]:
+    from robot_hoi.rl.eval_cli import summarise
+
+    return {"episodes_per_clip": job.eval_episodes, "seed": job.eval_seed, "clips": results,
+            "mean": summarise(results)}
 
 
 def _finite_or_none(value: float) -> float | None:
     return float(value) if math.isfinite(value) else None
 
 
-def _trim_scalars(path: Path, last_step: int) -> None:
+def _trim_log(path: Path, last_step: int) -> None:
+    """Drop the rows of a per-iteration JSONL log (scalars, eval curve) after `last_step`."""
     if not path.exists():
         return
     lines = path.read_text().splitlines(keepends=True)

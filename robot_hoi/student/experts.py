@@ -18,11 +18,11 @@ import json
 
 import torch
 
+from robot_hoi.rl.checkpoint import policy_checkpoint
 from robot_hoi.rl.runner import OnPolicyRunner
 from robot_hoi.student.height_map import HeightMap
 from robot_hoi.student.student_env import StudentEnv
 from robot_hoi.student.task import evaluation_cfg
-from robot_hoi.rl.checkpoint import policy_checkpoint
 from robot_hoi.student.teachers import TeacherMember, TeacherRun
 from robot_hoi.tasks.interaction import factory
 from robot_hoi.utils.atomic import atomic_write_text

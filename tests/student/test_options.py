@@ -7,13 +7,13 @@ import torch
 
 from robot_hoi.cli import main
 from robot_hoi.errors import UserError
+from robot_hoi.rl.checkpoint import latest_checkpoint
 from robot_hoi.student.config import (
     STUDENT_CONFIG,
     STUDENT_FAST_CONFIG,
     load_student_config,
     option_overrides,
 )
-from robot_hoi.rl.checkpoint import latest_checkpoint
 
 from .conftest import student_args
 
