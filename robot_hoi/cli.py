@@ -17,6 +17,7 @@ COMMAND_MODULES = {
     "retarget": "robot_hoi.retarget.cli",
     "train": "robot_hoi.rl.cli",
     "eval": "robot_hoi.rl.eval_cli",
+    "curve": "robot_hoi.rl.curve_cli",
     "play": "robot_hoi.rl.play",
     "export": "robot_hoi.export.cli",
     "deploy": "deploy.cli",

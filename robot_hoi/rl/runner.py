@@ -34,6 +34,7 @@ from robot_hoi.rl.checkpoint import (
 )
 from robot_hoi.rl.config import TrainConfig
 from robot_hoi.rl.env import VecEnv, concat_groups, group_dim
+from robot_hoi.rl.eval_curve import EVAL_CURVE_FILE, eval_rank
 from robot_hoi.rl.logger import JsonlWriter, Logger, LogWriter, TensorBoardWriter
 from robot_hoi.rl.models import ActorCritic
 from robot_hoi.rl.ppo import PPO
@@ -41,8 +42,6 @@ from robot_hoi.rl.progress import progress_text, training_progress
 from robot_hoi.rl.step_log import StepLog
 from robot_hoi.utils.atomic import atomic_write_text
 from robot_hoi.utils.timing import OFF
-
-EVAL_CURVE_FILE = "eval_curve.jsonl"
 
 _PPO_SCALARS = {
     "surrogate_loss": "Loss/surrogate",
@@ -229,7 +228,7 @@ class OnPolicyRunner:
             self.model.train()
         row = {"step": self.iteration, "samples": self.total_samples, "train_time_s": round(self.total_time_s, 1),
                "eval_s": round(time.monotonic() - started, 2), **metrics}
-        row["best"] = self.best_eval is None or _eval_rank(metrics) > _eval_rank(self.best_eval)
+        row["best"] = self.best_eval is None or eval_rank(metrics) > eval_rank(self.best_eval)
         if row["best"]:
             self.best_eval = row
             if self.log_dir is not None:
@@ -433,8 +432,3 @@ class OnPolicyRunner:
 
     def close(self) -> None:
         self.logger.close()
-
-
-def _eval_rank(metrics: dict[str, Any]) -> tuple[float, float]:
-    """Which evaluation is better: success first, then how long the clip was tracked."""
-    return float(metrics["success_rate"]), float(metrics["duration_s"])

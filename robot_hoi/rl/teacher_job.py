@@ -103,7 +103,8 @@ def train_teacher_group(job: TeacherJob, clips: list | None = None, log=print,
     from robot_hoi.embodiment import load_embodiment
     from robot_hoi.rl.checkpoint import BEST_CHECKPOINT, load_model_state, read_checkpoint
     from robot_hoi.rl.eval_cli import summarise
-    from robot_hoi.rl.runner import EVAL_CURVE_FILE, OnPolicyRunner
+    from robot_hoi.rl.eval_curve import EVAL_CURVE_FILE
+    from robot_hoi.rl.runner import OnPolicyRunner
     from robot_hoi.sim.device import check_gpu_memory, policy_device, resolve_env_cfg
     from robot_hoi.tasks.interaction import factory
 

@@ -116,7 +116,7 @@ def test_teachers_start_from_the_shipped_base_policy_unless_told(tmp_path, monke
 
 def test_in_training_evaluation_writes_a_curve_and_the_run_stands_for_its_best(job, tmp_path):
     from robot_hoi.rl.checkpoint import read_checkpoint, resolve_checkpoint
-    from robot_hoi.rl.runner import EVAL_CURVE_FILE
+    from robot_hoi.rl.eval_curve import EVAL_CURVE_FILE, find_curves, summarize
 
     logs = []
     job = replace(job, train_cfg=replace(job.train_cfg, runner=replace(job.train_cfg.runner, eval_interval=1,
@@ -130,6 +130,8 @@ def test_in_training_evaluation_writes_a_curve_and_the_run_stands_for_its_best(j
     best_row = [r for r in rows if r["best"]][-1]
     assert read_checkpoint(folder / "model_best.pt")["iteration"] == best_row["step"]
     assert resolve_checkpoint(folder) == folder / "model_best.pt"
+    (curve,) = find_curves([str(tmp_path)])  # what `robot-hoi curve` reads: the same rows, the same best
+    assert curve.rows == rows and summarize(curve.rows)["best"]["step"] == best_row["step"]
     evaluation = json.loads((folder / EVAL_FILE).read_text())
     assert evaluation["best"]["iteration"] == best_row["step"] and evaluation["best"]["checkpoint"] == "model_best.pt"
     assert evaluation["best"]["clips"]["synth_push_seed0"]["episodes"] == 2
