@@ -13,9 +13,12 @@ from robot_hoi.errors import UserError
 EVAL_CURVE_FILE = "eval_curve.jsonl"
 
 
-def eval_rank(metrics: dict) -> tuple[float, float]:
-    """Which evaluation is better (the one model_best.pt keeps): success first, then how long the clip was tracked."""
-    return float(metrics["success_rate"]), float(metrics["duration_s"])
+def eval_rank(metrics: dict) -> tuple[float, float, float]:
+    """Which evaluation is better (the one model_best.pt keeps): success first, then interaction success (the object
+    also tracked), then how long the clip was tracked. Measured on embedded:lift_place (intermimic_paper, seed 1):
+    success reached 1.00 two evaluations before interaction success did (0.44 -> 0.88 -> 1.00)."""
+    return (float(metrics["success_rate"]), float(metrics.get("interaction_success_rate", 0.0)),
+            float(metrics["duration_s"]))
 
 
 @dataclass
@@ -73,7 +76,7 @@ def with_wall_time(rows: list[dict]) -> list[dict]:
 
 
 def summarize(rows: list[dict], tail: int = 3) -> dict:
-    """First evaluation at success 1.0, the best (success, then duration: the runner's rank), the last, and the mean
+    """First evaluation at success 1.0, the best (the runner's rank: eval_rank), the last, and the mean
     duration and success of the last `tail` evaluations."""
     rows = with_wall_time(rows)
     if not rows:

@@ -219,7 +219,7 @@ class OnPolicyRunner:
 
     def evaluate_and_keep_best(self) -> dict[str, Any]:
         """Score the current policy with the evaluator; log it, and save it as model_best.pt when it beats the best
-        so far (higher success, then longer tracked duration). Returns the curve row."""
+        so far (eval_curve.eval_rank: success, interaction success, tracked duration). Returns the curve row."""
         started = time.monotonic()
         self.model.eval()
         try:

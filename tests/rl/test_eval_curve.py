@@ -29,6 +29,8 @@ def test_summary_first_success_best_and_late_mean(tmp_path):
     assert s["last"]["step"] == 125
     assert s["late_mean_success"] == pytest.approx(0.5) and s["late_mean_duration_s"] == pytest.approx(14.6 / 3)
     assert summarize([_row(25, 0.0, 2.0, 60)])["first_full_success"] is None
+    tracked = {**_row(150, 1.0, 6.6, 360), "interaction_success_rate": 0.5}  # the object tracked too: ranks higher
+    assert summarize(rows + [tracked])["best"]["step"] == 150
     assert [r["wall_time_s"] for r in with_wall_time(rows)] == [62.0, 124.0, 186.0, 248.0, 310.0]
 
 

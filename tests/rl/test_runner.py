@@ -211,28 +211,29 @@ def test_update_runs_on_the_physics_threads_and_the_rollout_keeps_its_own():
 
 def test_in_training_evaluation_keeps_the_best_policy_and_its_curve(tmp_path):
     runner, memory = _runner(tmp_path, ["runner.eval_interval=2", "runner.save_interval=100"])
-    scores = iter([(0.0, 3.0), (0.5, 2.0), (0.5, 1.0), (0.25, 9.0)])  # second is best: success ranks before duration
+    # second is best: success ranks before duration; the third's interaction success before the second's duration
+    scores = iter([(0.0, 0.0, 3.0), (0.5, 0.0, 2.0), (0.5, 0.25, 1.0), (0.25, 0.25, 9.0), (0.5, 0.0, 9.0)])
     seen = []
 
     def evaluator(model):
         assert not model.training  # the policy mean is scored, normalisers frozen
-        success, duration = next(scores)
-        return {"success_rate": success, "duration_s": duration}
+        success, interaction, duration = next(scores)
+        return {"success_rate": success, "interaction_success_rate": interaction, "duration_s": duration}
 
     runner.evaluator = evaluator
     runner.on_evaluation = seen.append
-    runner.learn(Budget(iterations=8))
+    runner.learn(Budget(iterations=10))
     assert runner.model.training
     rows = [json.loads(line) for line in (tmp_path / "eval_curve.jsonl").read_text().splitlines()]
-    assert [r["step"] for r in rows] == [2, 4, 6, 8] and rows == seen
-    assert [r["best"] for r in rows] == [True, True, False, False]
-    assert [v for _, v in memory.scalars["Eval/success_rate"]] == [0.0, 0.5, 0.5, 0.25]
+    assert [r["step"] for r in rows] == [2, 4, 6, 8, 10] and rows == seen
+    assert [r["best"] for r in rows] == [True, True, True, False, False]
+    assert [v for _, v in memory.scalars["Eval/success_rate"]] == [0.0, 0.5, 0.5, 0.25, 0.5]
     best = read_checkpoint(tmp_path / "model_best.pt")
-    assert best["iteration"] == 4 and best["eval"]["success_rate"] == 0.5
+    assert best["iteration"] == 6 and best["eval"]["interaction_success_rate"] == 0.25
 
     # a resumed run measures against the run's best, not against nothing
     resumed, _ = _runner(tmp_path, ["runner.eval_interval=2", "runner.save_interval=100"])
-    resumed.resume(tmp_path / "model_8.pt")
+    resumed.resume(tmp_path / "model_10.pt")
     resumed.evaluator = lambda model: {"success_rate": 0.25, "duration_s": 50.0}
     assert resumed.evaluate_and_keep_best()["best"] is False
-    assert read_checkpoint(tmp_path / "model_best.pt")["iteration"] == 4
+    assert read_checkpoint(tmp_path / "model_best.pt")["iteration"] == 6
