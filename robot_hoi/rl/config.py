@@ -101,8 +101,9 @@ class RunnerConfig:
     update_threads: int | None = None
     # In-training evaluation (0: off): every eval_interval iterations the run's evaluator (robot-hoi train's: the
     # eval protocol from the stand, with the training's spawn noise) scores the policy mean on eval_episodes
-    # episodes. Eval/* scalars and eval_curve.jsonl record it against training time, and the best so far (success,
-    # then tracked duration) is kept as model_best.pt: the policy `eval`, `export` and distillation take from a run.
+    # episodes. Eval/* scalars and eval_curve.jsonl record it against training time, and the best so far
+    # (eval_curve.eval_rank: success, then interaction success, then tracked duration) is kept as model_best.pt: the
+    # policy `eval`, `export` and distillation take from a run.
     eval_interval: int = 500
     eval_episodes: int = 16
 

@@ -76,7 +76,7 @@ def plot(curves: list[Curve], path: Path, x: str) -> None:
     ax_s.legend(fontsize="small")
     fig.tight_layout()
     with atomic_path(path) as tmp:
-        fig.savefig(tmp, format=path.suffix.lstrip(".") or "png")
+        fig.savefig(tmp, format=path.suffix.lstrip(".").lower())  # run() checked the suffix
     plt.close(fig)
 
 
