@@ -114,6 +114,11 @@ class InteractionEnvCfg:
                                             # (deploy.contract.warmup_offset) instead of stepping there at once
     max_episode_frames: int = 300           # supp. Table C
     reference_links: str = "ik"             # "ik" (robot-reachable link targets) | "scaled_human" (pure InterMimic)
+    # the retarget's leg PD targets also carry the torques that hold the body on its feet in contact. The root-held,
+    # zero-residual replay of OMOMO sub8_largebox_000 (bend over to push a floor box) then reaches the box (hands
+    # 2-3 cm from it at frame 13, pelvis within 1 cm) instead of hanging 20-25 cm off (pelvis 9.5 cm low); the
+    # shipped base policy was trained without it. Recorded in the cached retarget: a mismatch is an error
+    retarget_leg_loads: bool = False
     object_density: float = 25.0            # kg/m^3 of the hull (InterMimic's G1 setting); a known mass wins
     object_friction: float = 0.9            # supp. Table A
     object_torsional_friction: float = 0.0  # m; > 0: the object's contacts resist turning about their normal

@@ -10,7 +10,7 @@ import copy
 import json
 import re
 from collections import OrderedDict, defaultdict
-from dataclasses import asdict
+from dataclasses import asdict, replace
 from pathlib import Path
 
 from robot_hoi.errors import UserError
@@ -86,21 +86,31 @@ _RETARGETS: OrderedDict[str, object] = OrderedDict()
 _RETARGETS_KEPT = 8
 
 
-def load_or_retarget(clip, embodiment, cache: Path | None):
-    """The clip's robot-space reference (RobotMotion), cached as npz next to the run."""
+def load_or_retarget(clip, embodiment, cache: Path | None, leg_loads: bool = False):
+    """The clip's robot-space reference (RobotMotion), cached as npz next to the run. `leg_loads`: the leg PD
+    targets also carry the torques that hold the body on its feet (ExecutableSettings.compensate_leg_loads); a
+    cached reference made with the other setting is an error, not silently reused."""
     from robot_hoi.retarget.motion import RobotMotion
-    from robot_hoi.retarget.pipeline import retarget_clip
+    from robot_hoi.retarget.pipeline import RetargetOptions, retarget_clip
     from robot_hoi.utils.fingerprint import fingerprint
 
     path = cache / f"{_safe(clip.name)}.npz" if cache is not None else None
     if path is not None and path.exists():
-        return RobotMotion.load(path)
-    key = fingerprint((clip, embodiment))
+        motion = RobotMotion.load(path)
+        made_with = bool(motion.meta.get("executable", {}).get("compensate_leg_loads", False))
+        if made_with != leg_loads:
+            raise UserError(f"{path}: this reference was retargeted with leg-load compensation "
+                            f"{'on' if made_with else 'off'}, the task asks for it {'on' if leg_loads else 'off'} "
+                            "(retarget_leg_loads); delete the file to retarget, or keep the setting it was made with")
+        return motion
+    key = fingerprint((clip, embodiment, leg_loads))
     if key in _RETARGETS:
         _RETARGETS.move_to_end(key)
         motion = copy.deepcopy(_RETARGETS[key])
     else:
-        motion = retarget_clip(clip, embodiment).motion
+        defaults = RetargetOptions()
+        options = replace(defaults, executable=replace(defaults.executable, compensate_leg_loads=leg_loads))
+        motion = retarget_clip(clip, embodiment, options=options).motion
         motion.meta["feasibility"] = kinematic_report(motion, embodiment)
         _RETARGETS[key] = copy.deepcopy(motion)
         while len(_RETARGETS) > _RETARGETS_KEPT:
@@ -137,7 +147,7 @@ def make_env(clips: list, env_cfg: InteractionEnvCfg, embodiment, cache: Path | 
     scene = InteractionScene(embodiment, clips[0].object, self_collision=env_cfg.self_collision,
                              density=env_cfg.object_density, friction=env_cfg.object_friction,
                              torsional_friction=env_cfg.object_torsional_friction)
-    motions = motions or [load_or_retarget(c, embodiment, cache) for c in clips]
+    motions = motions or [load_or_retarget(c, embodiment, cache, env_cfg.retarget_leg_loads) for c in clips]
     references = [build_reference(c, m, env_cfg.reference_links) for c, m in zip(clips, motions, strict=True)]
     env = InteractionEnv(env_cfg, scene, references)
     # the retarget's feasibility figures where the retarget carries them (retargets made here and cached ones do);
