@@ -15,6 +15,8 @@ floor become extra, heavily weighted rows pushing them back up, a foot near the 
 and after the last iteration the base is raised by whatever penetration is left, so no sole point ends below it.
 Object: given the object's hull and pose per frame, hand probe points (sphere-swept hand collision geometry,
 object_contact.py) that sink into the hull become rows pushing them out along the nearest face normal.
+Floor for the hands: hand probes lower than their radius plus `hand_floor_clearance` above the floor become rows
+pushing them up (the mocap fingers grip a floor box below its bottom edge, where a robot hand cannot go).
 """
 
 from __future__ import annotations
@@ -57,6 +59,10 @@ class IKSettings:
     floor_weight: float = 50.0
     object_weight: float = 20.0  # pushes hand probe points out of the object's hull
     object_margin: float = 0.01  # m: probes this close to the hull already resist moving in (no chatter)
+    # hand probes kept this far above the floor (weighted like the soles): OMOMO hands grip a floor box by its bottom
+    # edge with the fingertips at or below the floor; the robot's fingers then hit the floor and the simulated wrists
+    # ended 4-6 cm above the reference (sub3_largebox_003), off the grip the squeeze was computed for. < 0: off
+    hand_floor_clearance: float = 0.01
     foot_roll_weight: float = 0.05  # keeps a foot near the floor from rolling onto its edge
     foot_roll_height: float = 0.08  # m: the roll term fades out as the sole rises to this height
     step_tolerance: float = 1e-6  # stop a frame's iterations once max |dq| falls below this
@@ -71,6 +77,7 @@ class IKResult:
     residual: np.ndarray  # (T, L) |IK point - target| in metres (target after the foot clamp)
     sole_min_z: np.ndarray  # (T,) lowest sole point; below floor_height means the feet penetrate
     object_penetration: np.ndarray  # (T,) deepest hand probe inside the object's hull (0 when none, or no object)
+    hand_floor_depth: np.ndarray  # (T,) deepest hand probe (its sphere) below the floor (0 when none)
     at_limit: np.ndarray  # (T, J_limited) bool, joint sitting on a limit (within 1e-4 rad)
     limited_joint_names: tuple[str, ...]
     iterations: np.ndarray  # (T,) Gauss-Newton iterations used
@@ -230,6 +237,7 @@ class IKSolver:
             self._add_floor_rows(H, g)
             self._add_foot_roll_rows(H, g)
             self._add_object_rows(H, g)
+            self._add_hand_floor_rows(H, g)
             if root_quat_wxyz is not None and s.root_rot_weight > 0 and self.root_body >= 0:
                 self._add_root_rows(H, g, root_quat_wxyz)
             H[np.diag_indices(n)] += s.damping
@@ -299,10 +307,9 @@ class IKSolver:
     def _probe_depths(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Hand probes vs this frame's object: (world points, depth = radius - hull distance, face normals)."""
         hull, pos, rot = self._object
-        d, pr = self.data, self.probes
-        world = d.xpos[pr.body_ids] + np.einsum("nij,nj->ni", d.xmat[pr.body_ids].reshape(-1, 3, 3), pr.local)
+        world = self._probe_world()
         dist, face = hull.signed_distance((world - pos) @ rot)
-        return world, pr.radius - dist, hull.normals[face] @ rot.T
+        return world, self.probes.radius - dist, hull.normals[face] @ rot.T
 
     def _add_object_rows(self, H: np.ndarray, g: np.ndarray) -> None:
         if self._object is None or self.probes is None or not len(self.probes):
@@ -317,6 +324,29 @@ class IKSolver:
         w = self.settings.object_weight
         H += w * Jn.T @ Jn
         g += w * Jn.T @ np.maximum(depth[near], 0.0)
+
+    def _probe_world(self) -> np.ndarray:
+        d, pr = self.data, self.probes
+        return d.xpos[pr.body_ids] + np.einsum("nij,nj->ni", d.xmat[pr.body_ids].reshape(-1, 3, 3), pr.local)
+
+    def _hand_floor_depths(self) -> tuple[np.ndarray, np.ndarray]:
+        """Hand probes vs the floor: (world points, depth = floor + radius - z; > 0 means the sphere is below it)."""
+        world = self._probe_world()
+        return world, self.settings.floor_height + self.probes.radius - world[:, 2]
+
+    def _add_hand_floor_rows(self, H: np.ndarray, g: np.ndarray) -> None:
+        s = self.settings
+        if s.hand_floor_clearance < 0 or self.probes is None or not len(self.probes):
+            return
+        world, depth = self._hand_floor_depths()
+        low = np.flatnonzero(depth > -s.hand_floor_clearance)
+        if not len(low):
+            return
+        jac = np.zeros((len(low), 3, self.model.nv))
+        point_jacobians(self.model, self.data, self.probes.body_ids[low], world[low], jac)
+        Jz = jac[:, 2, self.dofs]
+        H += s.floor_weight * Jz.T @ Jz
+        g += s.floor_weight * Jz.T @ (depth[low] + s.hand_floor_clearance)
 
     def _add_root_rows(self, H: np.ndarray, g: np.ndarray, quat_wxyz: np.ndarray) -> None:
         d = self.data
@@ -411,6 +441,7 @@ class IKSolver:
         point_pos = np.zeros((T, len(self.points), 3))
         sole_min = np.full(T, np.inf)
         penetration = np.zeros(T)
+        hand_floor = np.zeros(T)
         for t in range(T):
             self.data.qpos[:] = qpos[t]
             mujoco.mj_kinematics(self.model, self.data)
@@ -422,6 +453,8 @@ class IKSolver:
             if object_track is not None and self.probes is not None and len(self.probes):
                 self._object = self._object_at(object_track, t)
                 penetration[t] = max(float(self._probe_depths()[1].max()), 0.0)
+            if self.probes is not None and len(self.probes):
+                hand_floor[t] = max(float(self._hand_floor_depths()[1].max()), 0.0)
         self._object = None
         clamped = targets.copy()
         clamped[..., 2] = np.maximum(clamped[..., 2], self.link_min_z)
@@ -435,6 +468,7 @@ class IKSolver:
             residual=np.linalg.norm(point_pos - clamped, axis=-1),
             sole_min_z=sole_min,
             object_penetration=penetration,
+            hand_floor_depth=hand_floor,
             at_limit=at_limit,
             limited_joint_names=self.limited_joint_names,
             iterations=np.zeros(T, dtype=np.int64) if iterations is None else iterations,

@@ -81,6 +81,10 @@ def build_report(result, floor_height: float = 0.0) -> dict:
             "max_penetration_cm": _cm(penetration.max()),
             "frames_penetrating_over_5mm": int((penetration > 0.005).sum()),
         },
+        "hands_below_floor": {
+            "max_cm": _cm(ik.hand_floor_depth.max()),
+            "frames_over_5mm": int((ik.hand_floor_depth > 0.005).sum()),
+        },
         "joint_limits": {
             "frame_joint_hits": int(hits_per_joint.sum()),
             "joints": {n: int(c) for n, c in zip(ik.limited_joint_names, hits_per_joint, strict=True) if c},
@@ -120,6 +124,8 @@ def format_report(report: dict) -> str:
     feet = report["feet"]
     lines.append(f"feet: max penetration {feet['max_penetration_cm']} cm, "
                  f"{feet['frames_penetrating_over_5mm']} frames deeper than 5 mm")
+    hands = report["hands_below_floor"]
+    lines.append(f"hands: max {hands['max_cm']} cm below the floor, {hands['frames_over_5mm']} frames deeper than 5 mm")
     lim = report["joint_limits"]
     joints = ", ".join(f"{k} ({v})" for k, v in lim["joints"].items()) or "none"
     lines.append(f"joint limits: {lim['frame_joint_hits']} frame-joint contacts; {joints}")

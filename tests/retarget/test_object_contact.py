@@ -87,3 +87,25 @@ def test_ik_keeps_the_hand_out_of_the_object():
     assert free.link_pos[-1, 0, 0] < 0.405
     ignored = solver.solve(target, np.ones((T, 1)))  # without the object the tip goes in
     assert ignored.link_pos[-1, 0, 0] > 0.55
+
+
+def test_ik_keeps_the_hand_above_the_floor():
+    """A fingertip target below the floor (OMOMO hands grip a floor box under its bottom edge): the finger's probe
+    spheres stay `hand_floor_clearance` above it; with the floor rows off the tip goes under."""
+    from dataclasses import replace
+
+    from robot_hoi.retarget.ik import IKSettings
+
+    model = mujoco.MjModel.from_xml_string(ARM)
+    wrist = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, "wrist")
+    probes = hand_probe_points(model, [wrist])
+    T = 3
+    target = np.tile([[[0.2, 0.0, -0.05]]], (T, 1, 1))  # 5 cm below the floor, reachable by pitching down
+    kept = IKSolver(model, ["tip"], ["yaw", "pitch", "slide"], probes=probes).solve(target, np.ones((T, 1)))
+    # the tip probe (radius 1 cm) ends at 1 cm clearance, give or take the soft rows' give (weight 50 vs 1)
+    assert kept.link_pos[-1, 0, 2] > 0.01 + 0.01 - 0.005
+    assert kept.hand_floor_depth.max() < 0.005
+    off = replace(IKSettings(), hand_floor_clearance=-1.0)
+    under = IKSolver(model, ["tip"], ["yaw", "pitch", "slide"], probes=probes, settings=off).solve(
+        target, np.ones((T, 1)))
+    assert under.link_pos[-1, 0, 2] < -0.045 and under.hand_floor_depth.max() > 0.05
