@@ -26,6 +26,7 @@ def hold_test(clip, env_cfg, embodiment, motion=None, lead_frames: int = 10) -> 
     evaluation_settings(cfg, 1, 0)
     cfg.backend = "cpu"
     cfg.assist.enabled = True
+    cfg.assist.assisted_share = 1.0  # the root is held in every episode (training draws it for half of them)
     cfg.assist.object_kp = cfg.assist.object_kd = cfg.assist.object_kp_rot = cfg.assist.object_kd_rot = 0.0
     cfg.assist.object_gravity_share = 0.0
     cfg.init.stand_start_probability = 0.0
