@@ -31,8 +31,8 @@ def register(subparsers) -> None:
                    help="anchor weights from the distance to the object (default) or from the clip's contact labels")
     p.add_argument("--leg-loads", action="store_true",
                    help="offset the leg PD targets by the torques that carry the body on the feet in contact "
-                        "(a crouch holds its pose; walking replays sag ~3x less but do not last longer; off in "
-                        "training)")
+                        "(a crouch holds its pose; walking replays sag ~3x less but do not last longer); training "
+                        "uses it with --set env.retarget_leg_loads=true")
     add_clip_options(p, "--objects-dir")  # --objects-dir: the old spelling, kept working
     p.add_argument("--json", action="store_true", help="print the report as JSON on stdout")
     p.set_defaults(func=run)

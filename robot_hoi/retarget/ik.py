@@ -13,8 +13,9 @@ joint held (one active-set pass), then every limited joint is clamped. Feet: lin
 to at least their flat-foot height, sole points (the foot collision geoms' lowest corners) that sink below the
 floor become extra, heavily weighted rows pushing them back up, a foot near the floor is pulled toward zero roll,
 and after the last iteration the base is raised by whatever penetration is left, so no sole point ends below it.
-Object: given the object's hull and pose per frame, hand probe points (sphere-swept hand collision geometry,
-object_contact.py) that sink into the hull become rows pushing them out along the nearest face normal.
+Object: given the object's hull and pose per frame, probe points (sphere-swept hand and arm collision geometry,
+object_contact.py) that sink into the hull become rows pushing them out along the nearest face normal (the hand
+probes already from `object_margin` outside it).
 Floor for the hands: hand probes lower than their radius plus `hand_floor_clearance` above the floor become rows
 pushing them up (the mocap fingers grip a floor box below its bottom edge, where a robot hand cannot go).
 """
@@ -315,7 +316,10 @@ class IKSolver:
         if self._object is None or self.probes is None or not len(self.probes):
             return
         world, depth, normals = self._probe_depths()
-        near = np.flatnonzero(depth > -self.settings.object_margin)
+        # hand probes resist from the margin (no chatter at the grip); arm probes only once inside, so a forearm
+        # resting near the object leaves the solution as it was
+        margin = np.where(self.probes.hand_mask, self.settings.object_margin, 0.0)
+        near = np.flatnonzero(depth > -margin)
         if not len(near):
             return
         jac = np.zeros((len(near), 3, self.model.nv))
@@ -339,7 +343,7 @@ class IKSolver:
         if s.hand_floor_clearance < 0 or self.probes is None or not len(self.probes):
             return
         world, depth = self._hand_floor_depths()
-        low = np.flatnonzero(depth > -s.hand_floor_clearance)
+        low = np.flatnonzero((depth > -s.hand_floor_clearance) & self.probes.hand_mask)
         if not len(low):
             return
         jac = np.zeros((len(low), 3, self.model.nv))
@@ -454,7 +458,7 @@ class IKSolver:
                 self._object = self._object_at(object_track, t)
                 penetration[t] = max(float(self._probe_depths()[1].max()), 0.0)
             if self.probes is not None and len(self.probes):
-                hand_floor[t] = max(float(self._hand_floor_depths()[1].max()), 0.0)
+                hand_floor[t] = max(float(self._hand_floor_depths()[1][self.probes.hand_mask].max()), 0.0)
         self._object = None
         clamped = targets.copy()
         clamped[..., 2] = np.maximum(clamped[..., 2], self.link_min_z)

@@ -42,11 +42,16 @@ class HullPlanes:
 
 @dataclass(frozen=True)
 class ProbePoints:
-    """Points on robot bodies that must stay `radius` away from the object (sphere-swept hand geometry)."""
+    """Points on robot bodies that must stay `radius` away from the object (sphere-swept hand and arm geometry)."""
 
     body_ids: np.ndarray  # (N,)
     local: np.ndarray  # (N, 3) in the body frame
     radius: np.ndarray  # (N,)
+    hand: np.ndarray | None = None  # (N,) bool: on a hand (None: all are)
+
+    @property
+    def hand_mask(self) -> np.ndarray:
+        return np.ones(len(self), dtype=bool) if self.hand is None else self.hand
 
     def __len__(self) -> int:
         return len(self.body_ids)
@@ -63,37 +68,40 @@ def _subtree(model, root: int) -> list[int]:
     return out
 
 
-def hand_probe_points(model, root_bodies) -> ProbePoints:
-    """Probe points of the collision geoms in the subtrees of `root_bodies` (e.g. the wrist-yaw links).
+def hand_probe_points(model, root_bodies, arm_roots=()) -> ProbePoints:
+    """Probe points of the collision geoms in the subtrees of `root_bodies` (e.g. the wrist-yaw links), and of
+    `arm_roots` (e.g. the upper arms; their points outside the hands' subtrees have `hand` False).
 
     Capsules give their two end centres and radius, spheres their centre, boxes their 8 corners (radius 0) and
     centre (radius = smallest half size). Geom frames are fixed in their body, so the points are too.
     """
     import mujoco
 
+    hand_bodies = [b for root in root_bodies for b in _subtree(model, int(root))]
+    arm_bodies = [b for root in arm_roots for b in _subtree(model, int(root)) if b not in hand_bodies]
     bodies, local, radius = [], [], []
-    for root in root_bodies:
-        for body in _subtree(model, int(root)):
-            for g in np.flatnonzero(model.geom_bodyid == body):
-                if not (model.geom_contype[g] or model.geom_conaffinity[g]):
-                    continue
-                mat = np.zeros(9)
-                mujoco.mju_quat2Mat(mat, model.geom_quat[g])
-                rot, pos, size = mat.reshape(3, 3), model.geom_pos[g], model.geom_size[g]
-                gtype = model.geom_type[g]
-                if gtype == mujoco.mjtGeom.mjGEOM_CAPSULE:
-                    pts = [pos + rot[:, 2] * size[1], pos - rot[:, 2] * size[1]]
-                    rads = [size[0]] * 2
-                elif gtype == mujoco.mjtGeom.mjGEOM_SPHERE:
-                    pts, rads = [pos], [size[0]]
-                elif gtype == mujoco.mjtGeom.mjGEOM_BOX:
-                    signs = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], dtype=float)
-                    pts = list(pos + (signs * size[:3]) @ rot.T) + [pos]
-                    rads = [0.0] * 8 + [float(size[:3].min())]
-                else:
-                    continue
-                bodies.extend([body] * len(pts))
-                local.extend(pts)
-                radius.extend(rads)
-    return ProbePoints(np.asarray(bodies, dtype=np.int64), np.asarray(local, dtype=np.float64).reshape(-1, 3),
-                       np.asarray(radius, dtype=np.float64))
+    for body in hand_bodies + arm_bodies:
+        for g in np.flatnonzero(model.geom_bodyid == body):
+            if not (model.geom_contype[g] or model.geom_conaffinity[g]):
+                continue
+            mat = np.zeros(9)
+            mujoco.mju_quat2Mat(mat, model.geom_quat[g])
+            rot, pos, size = mat.reshape(3, 3), model.geom_pos[g], model.geom_size[g]
+            gtype = model.geom_type[g]
+            if gtype == mujoco.mjtGeom.mjGEOM_CAPSULE:
+                pts = [pos + rot[:, 2] * size[1], pos - rot[:, 2] * size[1]]
+                rads = [size[0]] * 2
+            elif gtype == mujoco.mjtGeom.mjGEOM_SPHERE:
+                pts, rads = [pos], [size[0]]
+            elif gtype == mujoco.mjtGeom.mjGEOM_BOX:
+                signs = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], dtype=float)
+                pts = list(pos + (signs * size[:3]) @ rot.T) + [pos]
+                rads = [0.0] * 8 + [float(size[:3].min())]
+            else:
+                continue
+            bodies.extend([body] * len(pts))
+            local.extend(pts)
+            radius.extend(rads)
+    bodies = np.asarray(bodies, dtype=np.int64)
+    return ProbePoints(bodies, np.asarray(local, dtype=np.float64).reshape(-1, 3), np.asarray(radius, dtype=np.float64),
+                       np.isin(bodies, hand_bodies))

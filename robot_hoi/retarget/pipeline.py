@@ -37,6 +37,11 @@ class RetargetOptions:
     grasp: GraspRule = field(default_factory=GraspRule)
     use_landmarks: bool = True  # IK on anatomical landmarks (landmarks.py) instead of the raw link origins
     executable: ExecutableSettings = field(default_factory=ExecutableSettings)  # smoothing + grasp squeeze
+    # The IK keeps the arm out of the object from this many bodies above the wrist-yaw link down to the fingertips
+    # (G1: 4 = from the upper arm). With the hands alone, sub3_largebox_003's left elbow sat 3 cm inside the box: in
+    # the root-held replay the elbow pushed the box 4.6 cm away and the left hand never reached its grip
+    # (contact_lost 20 frames in); with the arms, both hands hold until the lift (object_deviation at 36 frames)
+    arm_probe_levels: int = 4
 
 
 @dataclass
@@ -103,7 +108,10 @@ def retarget_targets(
     feet = [r for r, h in zip(targets.link_names, targets.human_names, strict=True) if link_group(h) == "feet"]
     landmarks = landmarks_for(cfg.name, targets.link_names) if options.use_landmarks else {}
     wrists = [r for r, h in zip(targets.link_names, targets.human_names, strict=True) if link_group(h) == "wrists"]
-    probes = hand_probe_points(model, resolve_links(model, wrists).body_ids) if wrists else None
+    probes = None
+    if wrists:
+        wrist_ids = resolve_links(model, wrists).body_ids
+        probes = hand_probe_points(model, wrist_ids, _ancestors(model, wrist_ids, options.arm_probe_levels))
     solver = IKSolver(model, targets.link_names, body_joints, q_default, feet, options.ik, landmarks, probes)
     preset, hold = finger_presets(model, cfg, targets, q_default, options.grasp)
 
@@ -154,6 +162,15 @@ def retarget_targets(
         },
     )
     return RetargetResult(motion=motion, targets=targets, ik=result, hold=hold, seconds=seconds)
+
+
+def _ancestors(model: mujoco.MjModel, bodies: np.ndarray, levels: int) -> np.ndarray:
+    """Each body's ancestor `levels` up (stopping below the world body)."""
+    out = np.asarray(bodies, dtype=np.int64).copy()
+    for _ in range(levels):
+        parent = model.body_parentid[out]
+        out = np.where(parent > 0, parent, out)
+    return out
 
 
 def _depenetrate(solver: IKSolver, result: IKResult, targets: RobotTargets, track, depth: float = 0.01,

@@ -131,7 +131,7 @@ def format_report(report: dict) -> str:
     lines.append(f"joint limits: {lim['frame_joint_hits']} frame-joint contacts; {joints}")
     inside = report.get("hands_in_object")
     if inside:
-        lines.append(f"hands inside the object's hull: robot max {inside['robot_max_cm']} cm "
+        lines.append(f"inside the object's hull: robot arms and hands max {inside['robot_max_cm']} cm "
                      f"({inside['robot_frames_over_1cm']} frames > 1 cm); human hand joints max "
                      f"{inside['human_max_cm']} cm ({inside['human_frames_over_1cm']} frames > 1 cm)")
     anchor = report["anchor"]

@@ -109,3 +109,45 @@ def test_ik_keeps_the_hand_above_the_floor():
     under = IKSolver(model, ["tip"], ["yaw", "pitch", "slide"], probes=probes, settings=off).solve(
         target, np.ones((T, 1)))
     assert under.link_pos[-1, 0, 2] < -0.045 and under.hand_floor_depth.max() > 0.05
+
+
+def test_ik_keeps_the_arm_out_of_the_object():
+    """The upper arm's collision geometry is probed too (`arm_roots`): OMOMO's sub3_largebox_003 had the left elbow
+    3 cm inside the box, which in simulation pushed the box away from the other hand. A 10 cm cube around the arm's
+    end, the fingertip target beyond it: with the hand's probes alone the arm goes through the cube."""
+    model = mujoco.MjModel.from_xml_string(ARM.replace('contype="0" conaffinity="0"', ""))  # the arm collides
+    base, wrist = (mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, n) for n in ("base", "wrist"))
+    with_arm = hand_probe_points(model, [wrist], [base])
+    assert len(with_arm) == 4 and with_arm.hand.tolist() == [True, True, False, False]
+    assert hand_probe_points(model, [wrist]).hand_mask.all()
+    cube = HullPlanes.from_vertices(trimesh.creation.box(extents=(0.1, 0.1, 0.1)).vertices)
+    T = 3
+    track = (cube, np.tile([0.3, 0.0, 0.5], (T, 1)), np.tile([1.0, 0.0, 0.0, 0.0], (T, 1)))
+    target = np.tile([[[0.6, 0.0, 0.5]]], (T, 1, 1))  # straight ahead: the arm's end (x 0.3) sits in the cube
+
+    def arm_depth(probes):
+        result = IKSolver(model, ["tip"], ["yaw", "pitch", "slide"], probes=probes).solve(
+            target, np.ones((T, 1)), object_track=track)
+        data = mujoco.MjData(model)
+        data.qpos[:] = result.qpos[-1]
+        mujoco.mj_kinematics(model, data)
+        end = data.xpos[base] + data.xmat[base].reshape(3, 3) @ np.array([0.3, 0.0, 0.0])
+        return 0.02 - cube.signed_distance((end - [0.3, 0.0, 0.5])[None])[0][0], result
+
+    inside, _ = arm_depth(hand_probe_points(model, [wrist]))
+    assert inside > 0.06  # the capsule end 5 cm deep plus its 2 cm radius
+    kept, result = arm_depth(with_arm)
+    assert kept < 0.015 and result.object_penetration.max() < 0.015
+
+
+def test_the_g1_arm_probes_start_at_the_upper_arm():
+    from robot_hoi.embodiment import build_model, load_embodiment
+    from robot_hoi.retarget.pipeline import RetargetOptions, _ancestors
+
+    model = build_model(load_embodiment("g1_inspire"))
+    wrists = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, f"{s}_wrist_yaw_link") for s in ("left", "right")]
+    roots = _ancestors(model, np.array(wrists), RetargetOptions().arm_probe_levels)
+    assert [mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, b) for b in roots] == [
+        "left_shoulder_yaw_link", "right_shoulder_yaw_link"]
+    probes = hand_probe_points(model, wrists, roots)
+    assert 0 < (~probes.hand).sum() < len(probes)  # upper arm, elbow and wrist links probed besides the hands
