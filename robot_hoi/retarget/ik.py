@@ -318,7 +318,7 @@ class IKSolver:
         world, depth, normals = self._probe_depths()
         # hand probes resist from the margin (no chatter at the grip); arm probes only once inside, so a forearm
         # resting near the object leaves the solution as it was
-        margin = np.where(self.probes.hand_mask, self.settings.object_margin, 0.0)
+        margin = np.where(self.probes.hand, self.settings.object_margin, 0.0)
         near = np.flatnonzero(depth > -margin)
         if not len(near):
             return
@@ -334,16 +334,18 @@ class IKSolver:
         return d.xpos[pr.body_ids] + np.einsum("nij,nj->ni", d.xmat[pr.body_ids].reshape(-1, 3, 3), pr.local)
 
     def _hand_floor_depths(self) -> tuple[np.ndarray, np.ndarray]:
-        """Hand probes vs the floor: (world points, depth = floor + radius - z; > 0 means the sphere is below it)."""
+        """Hand probes vs the floor: (world points, depth = floor + radius - z; > 0 means the sphere is below it;
+        -inf on the arm probes, which the floor rows leave alone)."""
         world = self._probe_world()
-        return world, self.settings.floor_height + self.probes.radius - world[:, 2]
+        depth = self.settings.floor_height + self.probes.radius - world[:, 2]
+        return world, np.where(self.probes.hand, depth, -np.inf)
 
     def _add_hand_floor_rows(self, H: np.ndarray, g: np.ndarray) -> None:
         s = self.settings
         if s.hand_floor_clearance < 0 or self.probes is None or not len(self.probes):
             return
         world, depth = self._hand_floor_depths()
-        low = np.flatnonzero((depth > -s.hand_floor_clearance) & self.probes.hand_mask)
+        low = np.flatnonzero(depth > -s.hand_floor_clearance)
         if not len(low):
             return
         jac = np.zeros((len(low), 3, self.model.nv))
@@ -458,7 +460,7 @@ class IKSolver:
                 self._object = self._object_at(object_track, t)
                 penetration[t] = max(float(self._probe_depths()[1].max()), 0.0)
             if self.probes is not None and len(self.probes):
-                hand_floor[t] = max(float(self._hand_floor_depths()[1][self.probes.hand_mask].max()), 0.0)
+                hand_floor[t] = max(float(self._hand_floor_depths()[1].max()), 0.0)
         self._object = None
         clamped = targets.copy()
         clamped[..., 2] = np.maximum(clamped[..., 2], self.link_min_z)

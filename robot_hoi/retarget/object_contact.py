@@ -47,11 +47,7 @@ class ProbePoints:
     body_ids: np.ndarray  # (N,)
     local: np.ndarray  # (N, 3) in the body frame
     radius: np.ndarray  # (N,)
-    hand: np.ndarray | None = None  # (N,) bool: on a hand (None: all are)
-
-    @property
-    def hand_mask(self) -> np.ndarray:
-        return np.ones(len(self), dtype=bool) if self.hand is None else self.hand
+    hand: np.ndarray  # (N,) bool: on a hand (else on an arm)
 
     def __len__(self) -> int:
         return len(self.body_ids)

@@ -40,7 +40,7 @@ class RetargetOptions:
     # The IK keeps the arm out of the object from this many bodies above the wrist-yaw link down to the fingertips
     # (G1: 4 = from the upper arm). With the hands alone, sub3_largebox_003's left elbow sat 3 cm inside the box: in
     # the root-held replay the elbow pushed the box 4.6 cm away and the left hand never reached its grip
-    # (contact_lost 20 frames in); with the arms, both hands hold until the lift (object_deviation at 36 frames)
+    # (contact_lost 20 frames in); with the arms (and leg loads), both hands hold until the lift (object_deviation after 29 frames)
     arm_probe_levels: int = 4
 
 

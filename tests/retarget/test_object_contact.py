@@ -119,7 +119,7 @@ def test_ik_keeps_the_arm_out_of_the_object():
     base, wrist = (mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, n) for n in ("base", "wrist"))
     with_arm = hand_probe_points(model, [wrist], [base])
     assert len(with_arm) == 4 and with_arm.hand.tolist() == [True, True, False, False]
-    assert hand_probe_points(model, [wrist]).hand_mask.all()
+    assert hand_probe_points(model, [wrist]).hand.all()
     cube = HullPlanes.from_vertices(trimesh.creation.box(extents=(0.1, 0.1, 0.1)).vertices)
     T = 3
     track = (cube, np.tile([0.3, 0.0, 0.5], (T, 1)), np.tile([1.0, 0.0, 0.0, 0.0], (T, 1)))
