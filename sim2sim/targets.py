@@ -109,7 +109,12 @@ def clip_targets(contract, sources: list[str], embodiment: str, self_collision: 
     from robot_hoi.embodiment import load_embodiment
     from robot_hoi.errors import UserError
     from robot_hoi.export.motion_sidecar import deploy_motion
-    from robot_hoi.tasks.interaction.factory import expand_sources, load_or_retarget, load_source
+    from robot_hoi.tasks.interaction.factory import (
+        expand_sources,
+        load_or_retarget,
+        load_source,
+        retarget_options,
+    )
     from robot_hoi.tasks.interaction.reference import build_reference
 
     env_cfg = task_config()
@@ -119,7 +124,8 @@ def clip_targets(contract, sources: list[str], embodiment: str, self_collision: 
         clip = load_source(source, clip_options)
         if clip.object is None:
             raise UserError(f"{source}: clip {clip.name} has no object mesh; sim2sim needs the object")
-        reference = build_reference(clip, load_or_retarget(clip, cfg, None), env_cfg.reference_links)
+        reference = build_reference(clip, load_or_retarget(clip, cfg, None, retarget_options(env_cfg)),
+                                    env_cfg.reference_links)
         motion = deploy_motion(reference, source=f"{source} (retargeted)")
         try:
             motion.check_against(contract)

@@ -33,6 +33,12 @@ def register(subparsers) -> None:
                    help="offset the leg PD targets by the torques that carry the body on the feet in contact "
                         "(a crouch holds its pose; walking replays sag ~3x less but do not last longer); training "
                         "uses it with --set env.retarget_leg_loads=true")
+    p.add_argument("--dynamics", action="store_true",
+                   help="offset the PD targets by the torques that drive the motion and cancel the servos' damping "
+                        "(inverse dynamics along the reference); training: --set env.retarget_dynamics=true")
+    p.add_argument("--finger-closure", type=float,
+                   help="fraction of the fingers' stroke closed while a hand holds (default 0.6; 0: flat hands that "
+                        "still squeeze); training: --set env.retarget_finger_closure=F")
     add_clip_options(p, "--objects-dir")  # --objects-dir: the old spelling, kept working
     p.add_argument("--json", action="store_true", help="print the report as JSON on stdout")
     p.set_defaults(func=run)
@@ -64,7 +70,12 @@ def run(args: argparse.Namespace) -> int:
     model = build_model(cfg)
     options = RetargetOptions()
     options = replace(options, mapping=replace(options.mapping, anchor_mode=args.anchor_mode),
-                      executable=replace(options.executable, compensate_leg_loads=args.leg_loads))
+                      executable=replace(options.executable, compensate_leg_loads=args.leg_loads,
+                                         compensate_dynamics=args.dynamics))
+    if args.finger_closure is not None:
+        if not 0.0 <= args.finger_closure <= 1.0:
+            raise UserError(f"--finger-closure must be within [0, 1], got {args.finger_closure}")
+        options = replace(options, grasp=replace(options.grasp, closure=args.finger_closure))
     result = retarget_clip(clip, cfg, model, scale=args.scale, options=options)
     report = build_report(result)
     report["clip"] = clip.name

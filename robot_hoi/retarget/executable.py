@@ -40,6 +40,9 @@ class ExecutableSettings:
     # 58 vs 75: the swing foot lands short and the pelvis drifts sideways), and lift_place's replay ends earlier
     # (73 vs 86 frames). Off until a walking policy is trained with it; `robot-hoi retarget --leg-loads`.
     compensate_leg_loads: bool = False
+    # ... and for the motion too: tau = M(q) qdd + C(q, qd) + g(q) along the reference (finite differences) plus the
+    # servos' damping kv qd, the held object's weight as m (g + its vertical acceleration). Off: static loads only
+    compensate_dynamics: bool = False
     support_height: float = 0.015     # m above the lowest sole point: sole points this low carry the body
 
 
@@ -96,9 +99,11 @@ def squeeze_offsets(model: mujoco.MjModel, qpos: np.ndarray, closure: dict[str, 
 
 def load_offsets(model: mujoco.MjModel, qpos: np.ndarray, joints: list[str],
                  carried: dict[str, np.ndarray], soles: tuple[np.ndarray, np.ndarray] | None = None,
-                 support_height: float = 0.015) -> np.ndarray:
+                 support_height: float = 0.015, motion: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """(T, nq) PD-target offsets tau / kp for the position-actuated `joints`: tau holds each pose (qvel 0) against
-    gravity and against the weights `carried` {body: (T,) N, pulling down at that body's origin}.
+    gravity and against the weights `carried` {body: (T,) N, pulling down at that body's origin}. With `motion`
+    ((T, nv) qvel, (T, nv) qacc of the reference) tau also drives the motion (inverse dynamics) and cancels the
+    servos' damping at the reference velocity (position actuators: force = kp (target - q) - kv qd).
 
     With `soles` (body ids (P,), body-frame points (P, 3): the feet's sole corners) the floor carries the robot:
     forces at the sole points within `support_height` of the lowest one balance the floating base (least-norm
@@ -107,20 +112,25 @@ def load_offsets(model: mujoco.MjModel, qpos: np.ndarray, joints: list[str],
     offsets = np.zeros_like(qpos)
     ids = joint_ids(model, joints)
     dofs, qadr = model.jnt_dofadr[ids], model.jnt_qposadr[ids]
-    kp = np.zeros(len(ids))
+    kp, kv = np.zeros(len(ids)), np.zeros(len(ids))
     for a in range(model.nu):
         if model.actuator_trntype[a] == mujoco.mjtTrn.mjTRN_JOINT and model.actuator_trnid[a, 0] in ids:
-            kp[list(ids).index(model.actuator_trnid[a, 0])] = model.actuator_gainprm[a, 0]
+            k = list(ids).index(model.actuator_trnid[a, 0])
+            kp[k], kv[k] = model.actuator_gainprm[a, 0], -model.actuator_biasprm[a, 2]
     driven = kp > 0
     bodies = {name: mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, name) for name in carried}
     jac = np.zeros((3, model.nv))
     for t in range(len(qpos)):
         data.qpos[:] = qpos[t]
+        if motion is not None:
+            data.qvel[:], data.qacc[:] = motion[0][t], motion[1][t]
         mujoco.mj_kinematics(model, data)
         mujoco.mj_comPos(model, data)
-        mujoco.mj_comVel(model, data)  # qvel stays 0: the bias below is gravity only
+        mujoco.mj_comVel(model, data)  # without `motion` qvel stays 0: the bias below is gravity only
         tau = np.zeros(model.nv)
-        mujoco.mj_rne(model, data, 0, tau)
+        mujoco.mj_rne(model, data, int(motion is not None), tau)
+        if motion is not None:
+            tau[dofs[driven]] += kv[driven] * data.qvel[dofs[driven]]
         for name, weight in carried.items():
             if weight[t] > 0:  # the hand holds the weight up: tau += J^T (0, 0, w)
                 mujoco.mj_jacBody(model, data, jac, None, bodies[name])

@@ -3,10 +3,11 @@
 from __future__ import annotations
 
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 
 import mujoco
 import numpy as np
+from scipy.ndimage import gaussian_filter1d
 
 from robot_hoi.retarget.executable import (
     ExecutableSettings,
@@ -53,6 +54,7 @@ class RetargetResult:
     seconds: float  # IK wall time
 
 LIFTED_M = 0.02  # object this far above its lowest height counts as carried (its weight on the hands)
+DYNAMICS_SIGMA_S = 0.05  # s, Gaussian low-pass of the reference velocity and acceleration for compensate_dynamics
 
 
 def default_qpos(model: mujoco.MjModel, cfg) -> np.ndarray:
@@ -189,12 +191,13 @@ def _depenetrate(solver: IKSolver, result: IKResult, targets: RobotTargets, trac
 
 def _squeeze(model: mujoco.MjModel, cfg, qpos: np.ndarray, hold: dict[str, np.ndarray], fps: float,
              options: RetargetOptions) -> np.ndarray:
-    """(T, nq) grasp-squeeze offsets for the PD targets (executable.py), ramped like the finger closure."""
+    """(T, nq) grasp-squeeze offsets for the PD targets (executable.py), ramped like the finger closure (at the
+    same rate; flat fingers, closure 0, still squeeze)."""
     sides = ("left", "right")
     if options.executable.squeeze_depth <= 0 or set(hold) != set(sides):
         return np.zeros_like(qpos)
-    ramp = {side: closure_profile(hold[side], fps, options.grasp) / max(options.grasp.closure, 1e-9)
-            for side in sides}
+    full_stroke = replace(options.grasp, closure=1.0)
+    ramp = {side: closure_profile(hold[side], fps, full_stroke) for side in sides}
     wrists = {side: f"{side}_wrist_yaw_link" for side in sides}
     arms = {side: [f"{side}_shoulder_pitch_joint", f"{side}_shoulder_roll_joint", f"{side}_shoulder_yaw_joint",
                    f"{side}_elbow_joint"] for side in sides}
@@ -209,15 +212,23 @@ def _load_compensation(model: mujoco.MjModel, qpos: np.ndarray, joints: list[str
     holding hands while it is off its rest; with `soles` (leg loads), carried down to the feet on the floor."""
     if not options.executable.compensate_loads:
         return np.zeros_like(qpos)
+    dynamic = options.executable.compensate_dynamics
     carried = {}
     if targets.object_mass_kg and set(hold) == {"left", "right"}:
         z = targets.object_pos[:, 2]
         lifted = np.clip((z - z.min()) / LIFTED_M, 0.0, 1.0)  # the floor carries the object until it rises
         both = sum(hold[side].astype(float) for side in hold)
+        g = 9.81 + (np.gradient(np.gradient(z, 1.0 / targets.fps), 1.0 / targets.fps) if dynamic else 0.0)
         for side in hold:
             share = np.where(hold[side], 1.0 / np.maximum(both, 1.0), 0.0)
-            carried[f"{side}_wrist_yaw_link"] = lifted * share * targets.object_mass_kg * 9.81
-    return load_offsets(model, qpos, joints, carried, soles, options.executable.support_height)
+            carried[f"{side}_wrist_yaw_link"] = lifted * share * targets.object_mass_kg * np.maximum(g, 0.0)
+    motion = None
+    if dynamic:
+        # the legs are not smoothed (planted feet): low-pass what is differentiated, or the PD targets jump
+        sigma = DYNAMICS_SIGMA_S * targets.fps
+        qvel = gaussian_filter1d(finite_difference_qvel(model, qpos, targets.fps), sigma, axis=0, mode="nearest")
+        motion = (qvel, gaussian_filter1d(np.gradient(qvel, 1.0 / targets.fps, axis=0), sigma, axis=0, mode="nearest"))
+    return load_offsets(model, qpos, joints, carried, soles, options.executable.support_height, motion)
 
 
 def robot_hand_lengths(model: mujoco.MjModel, link_map: dict[str, str]) -> dict[str, float]:

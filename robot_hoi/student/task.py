@@ -40,7 +40,7 @@ def student_env_cfg(env_cfg: InteractionEnvCfg) -> InteractionEnvCfg:
 def mocap_reference(clip, embodiment, env_cfg: InteractionEnvCfg, cache: Path | None):
     from robot_hoi.tasks.interaction.reference import build_reference
 
-    return build_reference(clip, factory.load_or_retarget(clip, embodiment, cache, env_cfg.retarget_leg_loads),
+    return build_reference(clip, factory.load_or_retarget(clip, embodiment, cache, factory.retarget_options(env_cfg)),
                            env_cfg.reference_links)
 
 

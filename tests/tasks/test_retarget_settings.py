@@ -1,10 +1,12 @@
-"""The task config's retarget setting (leg-load compensation) reaches the reference the env tracks, and a cached
-reference made with the other setting is refused instead of silently reused."""
+"""The task config's retarget settings (leg-load and dynamics compensation, finger closure) reach the reference the
+env tracks, and a cached reference made with other settings is refused instead of silently reused."""
+
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
-from robot_hoi.embodiment import load_embodiment
+from robot_hoi.embodiment import build_model, load_embodiment
 from robot_hoi.errors import UserError
 from robot_hoi.tasks.interaction import factory
 from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg
@@ -25,8 +27,44 @@ def test_leg_load_setting_reaches_the_env_and_guards_the_cache(tmp_path):
     leg_shift = np.abs(tracked[:, legs] - plain.joint_pos[:, legs]).max()
     assert leg_shift > 0.02  # the stance torques / kp moved the leg targets
     np.testing.assert_allclose(tracked[:, arms], plain.joint_pos[:, arms], atol=1e-5)  # arms as before
-    np.testing.assert_allclose(plain.qpos, factory.load_or_retarget(clip, embodiment, cached.parent, True).qpos,
+    np.testing.assert_allclose(plain.qpos, factory.load_or_retarget(clip, embodiment, cached.parent, factory.retarget_options(cfg)).qpos,
                                atol=1e-6)  # same states: only the PD targets differ
 
     with pytest.raises(UserError, match=rf"{cached.name}.*leg-load compensation on.*asks for it off"):
         factory.make_env([clip], InteractionEnvCfg(num_envs=2, backend="cpu"), embodiment, cache=tmp_path)
+
+
+def test_flat_fingers_keep_the_squeeze_and_dynamics_move_the_targets(tmp_path):
+    """Finger closure 0 leaves the fingers open while holding but the arms still squeeze (the squeeze ramp used to be
+    divided by the closure, so flat fingers squeezed nothing); dynamics compensation shifts the PD targets of the
+    moving joints and not the states; a cache made with the default closure is refused."""
+    embodiment = load_embodiment("g1_inspire")
+    clip = factory.load_source("embedded:lift_place")
+    plain = factory.load_or_retarget(clip, embodiment, None)
+    cfg = InteractionEnvCfg(num_envs=2, backend="cpu", retarget_finger_closure=0.0, retarget_dynamics=True)
+    flat = factory.load_or_retarget(clip, embodiment, tmp_path, factory.retarget_options(cfg))
+
+    names = list(flat.actuator_names)
+    fingers = [names.index(c.joint) for hand in embodiment.hands.values() for c in hand.channels]
+    open_pose = flat.joint_pos[0, fingers]
+    assert np.abs(plain.joint_pos[:, fingers] - open_pose).max() > 0.3  # the default closes them while holding
+    np.testing.assert_allclose(flat.joint_pos[:, fingers], np.broadcast_to(open_pose, (len(flat.joint_pos), len(fingers))),
+                               atol=1e-6)
+    arms = [names.index(n) for n in names if "shoulder" in n or "elbow" in n]
+    model = build_model(embodiment)
+    act_qadr = [int(model.jnt_qposadr[model.joint(n).id]) for n in names]
+    squeeze_and_loads = flat.joint_pos[:, arms] - flat.qpos[:, act_qadr][:, arms]
+    static = replace(factory.retarget_options(cfg), executable=replace(factory.retarget_options(cfg).executable,
+                                                                        compensate_dynamics=False))
+    no_dynamics = factory.load_or_retarget(clip, embodiment, None, static)
+    np.testing.assert_allclose(no_dynamics.qpos, flat.qpos, atol=1e-9)  # dynamics touch the PD targets only
+    held = no_dynamics.joint_pos[:, arms] - no_dynamics.qpos[:, act_qadr][:, arms]
+    gravity_only = factory.load_or_retarget(clip, embodiment, None, replace(
+        static, executable=replace(static.executable, squeeze_depth=0.0)))
+    squeeze = held - (gravity_only.joint_pos[:, arms] - gravity_only.qpos[:, act_qadr][:, arms])
+    assert np.abs(squeeze).max() > 0.05  # the flat hands still squeeze the box
+    assert np.abs(squeeze_and_loads - held).max() > 0.02  # the motion's torques moved the arm targets
+
+    with pytest.raises(UserError, match=r"finger closure 0, the task asks for it 0.6 \(retarget_finger_closure\)"):
+        factory.make_env([clip], InteractionEnvCfg(num_envs=2, backend="cpu", retarget_dynamics=True),
+                         embodiment, cache=tmp_path)

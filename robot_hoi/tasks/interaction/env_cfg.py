@@ -119,6 +119,11 @@ class InteractionEnvCfg:
     # 2-3 cm from it at frame 13, pelvis within 1 cm) instead of hanging 20-25 cm off (pelvis 9.5 cm low); the
     # shipped base policy was trained without it. Recorded in the cached retarget: a mismatch is an error
     retarget_leg_loads: bool = False
+    # ... and the torques that drive the reference's motion and cancel the servos' damping along it (inverse
+    # dynamics; retarget ExecutableSettings.compensate_dynamics). Recorded in the cached retarget like leg loads
+    retarget_dynamics: bool = False
+    # fraction of the fingers' open->closed stroke while a hand holds (None: the retarget's GraspRule default, 0.6)
+    retarget_finger_closure: float | None = None
     object_density: float = 25.0            # kg/m^3 of the hull (InterMimic's G1 setting); a known mass wins
     object_friction: float = 0.9            # supp. Table A
     object_torsional_friction: float = 0.0  # m; > 0: the object's contacts resist turning about their normal

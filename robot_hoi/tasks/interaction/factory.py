@@ -86,30 +86,55 @@ _RETARGETS: OrderedDict[str, object] = OrderedDict()
 _RETARGETS_KEPT = 8
 
 
-def load_or_retarget(clip, embodiment, cache: Path | None, leg_loads: bool = False):
-    """The clip's robot-space reference (RobotMotion), cached as npz next to the run. `leg_loads`: the leg PD
-    targets also carry the torques that hold the body on its feet (ExecutableSettings.compensate_leg_loads); a
-    cached reference made with the other setting is an error, not silently reused."""
+# The retarget settings a task chooses: (env config field, the RetargetOptions value it sets, its name in errors)
+_RETARGET_SETTINGS = (
+    ("retarget_leg_loads", ("executable", "compensate_leg_loads"), "leg-load compensation"),
+    ("retarget_dynamics", ("executable", "compensate_dynamics"), "dynamics compensation"),
+    ("retarget_finger_closure", ("grasp", "closure"), "finger closure"),
+)
+
+
+def retarget_options(env_cfg: InteractionEnvCfg | None = None):
+    """RetargetOptions with the task's retarget settings (the retarget's defaults where the config has none)."""
+    from robot_hoi.retarget.pipeline import RetargetOptions
+
+    options = RetargetOptions()
+    closure = getattr(env_cfg, "retarget_finger_closure", None)
+    if closure is not None and not 0.0 <= closure <= 1.0:
+        raise UserError(f"env.retarget_finger_closure must be within [0, 1] (a fraction of the stroke), got {closure}")
+    for field, (group, name), _ in _RETARGET_SETTINGS:
+        value = getattr(env_cfg, field, None) if env_cfg is not None else None
+        if value is not None:
+            options = replace(options, **{group: replace(getattr(options, group), **{name: value})})
+    return options
+
+
+def load_or_retarget(clip, embodiment, cache: Path | None, options=None):
+    """The clip's robot-space reference (RobotMotion), cached as npz next to the run. `options`: RetargetOptions
+    (retarget_options(env_cfg); None = the defaults); a cached reference made with other task settings (leg loads,
+    dynamics, finger closure) is an error, not silently reused."""
     from robot_hoi.retarget.motion import RobotMotion
-    from robot_hoi.retarget.pipeline import RetargetOptions, retarget_clip
+    from robot_hoi.retarget.pipeline import retarget_clip
     from robot_hoi.utils.fingerprint import fingerprint
 
+    options = options if options is not None else retarget_options()
     path = cache / f"{_safe(clip.name)}.npz" if cache is not None else None
     if path is not None and path.exists():
         motion = RobotMotion.load(path)
-        made_with = bool(motion.meta.get("executable", {}).get("compensate_leg_loads", False))
-        if made_with != leg_loads:
-            raise UserError(f"{path}: this reference was retargeted with leg-load compensation "
-                            f"{'on' if made_with else 'off'}, the task asks for it {'on' if leg_loads else 'off'} "
-                            "(retarget_leg_loads); delete the file to retarget, or keep the setting it was made with")
+        for field, (group, name), label in _RETARGET_SETTINGS:
+            default = getattr(getattr(retarget_options(), group), name)
+            made_with = motion.meta.get(group, {}).get(name, default)  # older files: the default of its time
+            wanted = getattr(getattr(options, group), name)
+            if made_with != wanted:
+                raise UserError(f"{path}: this reference was retargeted with {label} {_setting(made_with)}, the task "
+                                f"asks for it {_setting(wanted)} ({field}); delete the file to retarget, or keep the "
+                                "setting it was made with")
         return motion
-    key = fingerprint((clip, embodiment, leg_loads))
+    key = fingerprint((clip, embodiment, options))
     if key in _RETARGETS:
         _RETARGETS.move_to_end(key)
         motion = copy.deepcopy(_RETARGETS[key])
     else:
-        defaults = RetargetOptions()
-        options = replace(defaults, executable=replace(defaults.executable, compensate_leg_loads=leg_loads))
         motion = retarget_clip(clip, embodiment, options=options).motion
         motion.meta["feasibility"] = kinematic_report(motion, embodiment)
         _RETARGETS[key] = copy.deepcopy(motion)
@@ -118,6 +143,10 @@ def load_or_retarget(clip, embodiment, cache: Path | None, leg_loads: bool = Fal
     if path is not None:
         motion.save(path)
     return motion
+
+
+def _setting(value) -> str:
+    return ("on" if value else "off") if isinstance(value, bool) else f"{value:g}"
 
 
 def kinematic_report(motion, embodiment) -> dict:
@@ -147,7 +176,7 @@ def make_env(clips: list, env_cfg: InteractionEnvCfg, embodiment, cache: Path | 
     scene = InteractionScene(embodiment, clips[0].object, self_collision=env_cfg.self_collision,
                              density=env_cfg.object_density, friction=env_cfg.object_friction,
                              torsional_friction=env_cfg.object_torsional_friction)
-    motions = motions or [load_or_retarget(c, embodiment, cache, env_cfg.retarget_leg_loads) for c in clips]
+    motions = motions or [load_or_retarget(c, embodiment, cache, retarget_options(env_cfg)) for c in clips]
     references = [build_reference(c, m, env_cfg.reference_links) for c, m in zip(clips, motions, strict=True)]
     env = InteractionEnv(env_cfg, scene, references)
     # the retarget's feasibility figures where the retarget carries them (retargets made here and cached ones do);
