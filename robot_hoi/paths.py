@@ -9,6 +9,7 @@ REPO_ROOT = Path(__file__).resolve().parents[1]
 CONFIGS_DIR = REPO_ROOT / "configs"
 URDF_DIR = REPO_ROOT / "urdf"
 POLICIES_DIR = REPO_ROOT / "policies"
+TASK_CONFIG = CONFIGS_DIR / "tasks" / "interaction.yaml"  # the interaction task (teachers, eval, export)
 
 
 def shared_dir() -> Path | None:

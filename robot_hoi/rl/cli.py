@@ -7,9 +7,8 @@ import os
 from pathlib import Path
 
 from robot_hoi.data.cli_options import add_clip_options, clip_options
-from robot_hoi.paths import CONFIGS_DIR
+from robot_hoi.paths import CONFIGS_DIR, TASK_CONFIG
 
-TASK_CONFIG = CONFIGS_DIR / "tasks" / "interaction.yaml"
 SUMMARY_FILE = "teachers.json"  # per-teacher summaries of the last `robot-hoi train` into this run folder
 PRESETS = {"paper": CONFIGS_DIR / "train" / "ppo.yaml", "fast": CONFIGS_DIR / "train" / "ppo_fast.yaml"}
 

@@ -12,9 +12,7 @@ import argparse
 import json
 
 from robot_hoi.data.cli_options import add_clip_options, clip_options
-from robot_hoi.paths import CONFIGS_DIR
-
-TASK_CONFIG = CONFIGS_DIR / "tasks" / "interaction.yaml"
+from robot_hoi.paths import TASK_CONFIG
 
 
 def register(subparsers) -> None:
