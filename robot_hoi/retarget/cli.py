@@ -62,6 +62,7 @@ def run(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
     from robot_hoi.embodiment import build_model, load_embodiment
+    from robot_hoi.retarget.hands import check_closure
     from robot_hoi.retarget.pipeline import RetargetOptions, retarget_clip
     from robot_hoi.retarget.report import build_report, format_report
 
@@ -73,9 +74,8 @@ def run(args: argparse.Namespace) -> int:
                       executable=replace(options.executable, compensate_leg_loads=args.leg_loads,
                                          compensate_dynamics=args.dynamics))
     if args.finger_closure is not None:
-        if not 0.0 <= args.finger_closure <= 1.0:
-            raise UserError(f"--finger-closure must be within [0, 1], got {args.finger_closure}")
-        options = replace(options, grasp=replace(options.grasp, closure=args.finger_closure))
+        closure = check_closure(args.finger_closure, "--finger-closure")
+        options = replace(options, grasp=replace(options.grasp, closure=closure))
     result = retarget_clip(clip, cfg, model, scale=args.scale, options=options)
     report = build_report(result)
     report["clip"] = clip.name

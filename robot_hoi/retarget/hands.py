@@ -21,6 +21,15 @@ class GraspRule:
     ramp_s: float = 0.3  # seconds for a full open->closed stroke
 
 
+def check_closure(value: float, name: str) -> float:
+    """A user-given finger closure (`name`: the flag or config key it came from), which must be a stroke fraction."""
+    from robot_hoi.errors import UserError
+
+    if not 0.0 <= value <= 1.0:
+        raise UserError(f"{name} must be within [0, 1] (a fraction of the finger stroke), got {value}")
+    return value
+
+
 @dataclass(frozen=True)
 class HandJoints:
     """One hand's driven finger joints with their open and closed angles (rad)."""

@@ -54,8 +54,8 @@ def test_flat_fingers_keep_the_squeeze_and_dynamics_move_the_targets(tmp_path):
     model = build_model(embodiment)
     act_qadr = [int(model.jnt_qposadr[model.joint(n).id]) for n in names]
     squeeze_and_loads = flat.joint_pos[:, arms] - flat.qpos[:, act_qadr][:, arms]
-    static = replace(factory.retarget_options(cfg), executable=replace(factory.retarget_options(cfg).executable,
-                                                                        compensate_dynamics=False))
+    dynamic = factory.retarget_options(cfg)
+    static = replace(dynamic, executable=replace(dynamic.executable, compensate_dynamics=False))
     no_dynamics = factory.load_or_retarget(clip, embodiment, None, static)
     np.testing.assert_allclose(no_dynamics.qpos, flat.qpos, atol=1e-9)  # dynamics touch the PD targets only
     held = no_dynamics.joint_pos[:, arms] - no_dynamics.qpos[:, act_qadr][:, arms]

@@ -96,12 +96,12 @@ _RETARGET_SETTINGS = (
 
 def retarget_options(env_cfg: InteractionEnvCfg | None = None):
     """RetargetOptions with the task's retarget settings (the retarget's defaults where the config has none)."""
+    from robot_hoi.retarget.hands import check_closure
     from robot_hoi.retarget.pipeline import RetargetOptions
 
     options = RetargetOptions()
-    closure = getattr(env_cfg, "retarget_finger_closure", None)
-    if closure is not None and not 0.0 <= closure <= 1.0:
-        raise UserError(f"env.retarget_finger_closure must be within [0, 1] (a fraction of the stroke), got {closure}")
+    if getattr(env_cfg, "retarget_finger_closure", None) is not None:
+        check_closure(env_cfg.retarget_finger_closure, "env.retarget_finger_closure")
     for field, (group, name), _ in _RETARGET_SETTINGS:
         value = getattr(env_cfg, field, None) if env_cfg is not None else None
         if value is not None:
@@ -121,8 +121,9 @@ def load_or_retarget(clip, embodiment, cache: Path | None, options=None):
     path = cache / f"{_safe(clip.name)}.npz" if cache is not None else None
     if path is not None and path.exists():
         motion = RobotMotion.load(path)
+        defaults = retarget_options()
         for field, (group, name), label in _RETARGET_SETTINGS:
-            default = getattr(getattr(retarget_options(), group), name)
+            default = getattr(getattr(defaults, group), name)
             made_with = motion.meta.get(group, {}).get(name, default)  # older files: the default of its time
             wanted = getattr(getattr(options, group), name)
             if made_with != wanted:
