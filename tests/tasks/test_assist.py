@@ -71,10 +71,34 @@ def test_object_assist_carries_the_object_toward_its_reference(scene):
 
 def test_curriculum_logged_and_checkpointed(scene):
     env = _env(scene, enabled=True, anneal_samples=100)
-    assert env.update_curriculum(50) == {"Curriculum/assist_level": pytest.approx(0.5)}
+    assert env.update_curriculum(50) == {"Curriculum/assist_level": pytest.approx(0.5),
+                                         "Curriculum/object_termination_m": env.cfg.terminations.max_mean_object_point_error}
     assert env.curriculum_state() == {"assist_level": pytest.approx(0.5)}
     env.update_curriculum(200)
     assert env.assist_level == 0.0
+
+
+def test_object_line_widens_with_the_level_and_tightens_as_it_anneals(scene):
+    """A box 20 cm above its reference ends the episode at the evaluated 12 cm line; with a 0.3 m margin at full
+    level it does not, at half level (0.27 m) neither, and once the assist has faded it does again."""
+    env = _env(scene, enabled=True, anneal_samples=100, object_termination_margin=0.3)
+    env.cfg.terminations.max_mean_object_point_error = 0.12
+
+    def object_deviation_after_lift(total_samples: int) -> bool:
+        env.update_curriculum(total_samples)
+        env.reset()
+        qpos, qvel = env.backend.qpos.clone(), env.backend.qvel.clone()
+        qpos[:, env.layout.object_qpos + 2] += 0.2
+        env.backend.set_state(torch.arange(2), qpos, qvel)
+        env._update_state()
+        return bool(env._terminations()["object_deviation"].all())
+
+    assert not object_deviation_after_lift(0)
+    assert env.update_curriculum(50)["Curriculum/object_termination_m"] == pytest.approx(0.27)
+    assert not object_deviation_after_lift(50)
+    assert object_deviation_after_lift(100)
+    assert object_deviation_after_lift(0) is False  # the configured line itself is never changed
+    assert env.cfg.terminations.max_mean_object_point_error == 0.12
 
 
 def test_evaluation_never_assists():

@@ -29,6 +29,7 @@ def hold_test(clip, env_cfg, embodiment, motion=None, lead_frames: int = 10) -> 
     cfg.assist.assisted_share = 1.0  # the root is held in every episode (training draws it for half of them)
     cfg.assist.object_kp = cfg.assist.object_kd = cfg.assist.object_kp_rot = cfg.assist.object_kd_rot = 0.0
     cfg.assist.object_gravity_share = 0.0
+    cfg.assist.object_termination_margin = 0.0  # the evaluated object line
     cfg.init.stand_start_probability = 0.0
     cfg.init.joint_noise = 0.0
     env = factory.make_env([clip], cfg, embodiment, motions=[motion] if motion is not None else None)

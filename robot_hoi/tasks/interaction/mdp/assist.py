@@ -8,6 +8,8 @@ centre of mass, held over the sub-steps). Never in eval, export or sim2sim: eval
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import torch
 from torch import Tensor
 
@@ -21,6 +23,15 @@ def pd_wrench(pos: Tensor, quat: Tensor, lin_vel: Tensor, ang_vel: Tensor, ref_p
     force = kp * (ref_pos - pos) + kd * (ref_lin_vel - lin_vel)
     torque = kp_rot * quat_to_rotvec(quat_mul(ref_quat, quat_conj(quat))) + kd_rot * (ref_ang_vel - ang_vel)
     return torch.cat([force, torque], dim=-1)
+
+
+def terminations_at(cfg, thresholds, level: float):
+    """The termination thresholds at curriculum `level`: the object line widened by cfg.object_termination_margin x
+    level (`thresholds` itself when there is nothing to widen)."""
+    margin = cfg.object_termination_margin * level if cfg.enabled else 0.0
+    if margin <= 0.0:
+        return thresholds
+    return replace(thresholds, max_mean_object_point_error=thresholds.max_mean_object_point_error + margin)
 
 
 def assist_wrench(env, level: float) -> Tensor:
