@@ -95,23 +95,6 @@ REQUIRED_KEYS = (
 )
 
 
-FOOT_LINKS = ("left_ankle_roll_link", "right_ankle_roll_link")  # the feet a stand is placed by
-
-
-def stand_pelvis_xy(ref_feet_centre_xy, ref_root_quat_wxyz, stand_feet_offset_xy):
-    """Where a default stand's pelvis goes (x, y) so that its feet centre lands on the start frame's: the
-    reference's feet centre (..., 2; mean of FOOT_LINKS, world) minus the stand's own feet centre relative to its
-    pelvis (2,; heading frame) turned to the reference root's heading. A stand on the reference's pelvis instead
-    puts the feet of a bent-over frame 0 4-7 cm off the reference's (sub3_largebox_003), and a crouching policy
-    never steps back onto them. numpy arrays or torch tensors (arithmetic only)."""
-    w, x, y, z = (ref_root_quat_wxyz[..., i] for i in range(4))
-    cos, sin = 1 - 2 * (y * y + z * z), 2 * (w * z + x * y)  # heading of the root's x axis, unnormalised
-    norm = (cos * cos + sin * sin) ** 0.5
-    cos, sin = cos / norm, sin / norm
-    ox, oy = stand_feet_offset_xy[0], stand_feet_offset_xy[1]
-    return ref_feet_centre_xy[..., 0] - (cos * ox - sin * oy), ref_feet_centre_xy[..., 1] - (sin * ox + cos * oy)
-
-
 def warmup_offset(start, target, steps_done, warmup_frames):
     """The PD target offset `steps_done` steps into a warmup of `warmup_frames` steps under the warmup blend: a
     straight line from `start` (the pose the warmup began in; default_pose from the stand) at step 0 to `target`

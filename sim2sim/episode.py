@@ -14,7 +14,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from deploy.contract import FOOT_LINKS, stand_pelvis_xy
 from deploy.loop import Runtime
 from deploy.observations import ObservationBuilder
 from deploy.policy import OnnxPolicy
@@ -22,7 +21,6 @@ from deploy.rotations import quat_wxyz_from_axis_angle, yaw_of_quat_wxyz
 from deploy.runlog import EventLog, TickRecorder
 from deploy.safety import Phase, SafetyConfig
 from robot_hoi import termination
-from robot_hoi.utils.mujoco_model import feet_centre_offset
 from sim2sim import metrics
 from sim2sim.clock import SimClock
 from sim2sim.hands import SimulatedInspireHands
@@ -87,17 +85,13 @@ def _policy(path: str) -> OnnxPolicy:
     return _POLICIES[path]
 
 
-def start_qpos(model, layout: WorldLayout, motion, link_names, rng: np.random.Generator) -> np.ndarray:
-    """The default stand (the model's 'default' keyframe) at the reference's heading, its feet centre on the first
-    frame's (deploy.contract.stand_pelvis_xy)."""
+def start_qpos(model, layout: WorldLayout, motion, rng: np.random.Generator) -> np.ndarray:
+    """The default stand (the model's 'default' keyframe) at the reference's first root position and heading."""
     import mujoco
 
     key = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_KEY, "default")
     qpos = np.array(model.key_qpos[key][: layout.robot_nq], dtype=np.float64)
-    feet = [list(link_names).index(name) for name in FOOT_LINKS]
-    offset = feet_centre_offset(model, qpos, FOOT_LINKS)
-    place = stand_pelvis_xy(motion.link_pos[0, feet, :2].mean(0), np.asarray(motion.root_quat_wxyz[0]), offset)
-    qpos[0:2] = np.array(place) + rng.uniform(-SPAWN_NOISE_XY, SPAWN_NOISE_XY, 2)
+    qpos[0:2] = motion.root_pos[0, 0:2] + rng.uniform(-SPAWN_NOISE_XY, SPAWN_NOISE_XY, 2)
     yaw = float(yaw_of_quat_wxyz(motion.root_quat_wxyz[0]))
     qpos[3:7] = quat_wxyz_from_axis_angle(np.array([0.0, 0.0, 1.0]), yaw)
     return qpos
@@ -113,7 +107,7 @@ def run_episode(job: EpisodeJob) -> dict:
     layout = WorldLayout.resolve(model, contract)
     seeds = np.random.SeedSequence([job.seed, job.episode]).spawn(4)
     world = SimWorld(model, layout, job.perturbation, np.random.default_rng(seeds[0]))
-    world.reset(start_qpos(model, layout, motion, contract.link_names, np.random.default_rng(seeds[1])), motion.object_pos[0],
+    world.reset(start_qpos(model, layout, motion, np.random.default_rng(seeds[1])), motion.object_pos[0],
                 motion.object_quat_wxyz[0])
     clock = SimClock(world)
     body = MujocoBody(world, contract.num_body, job.perturbation, np.random.default_rng(seeds[2]))

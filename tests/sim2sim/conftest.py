@@ -65,7 +65,7 @@ def make_world(target, contract):
         model = load_model(target.scene)
         layout = WorldLayout.resolve(model, contract)
         world = SimWorld(model, layout, perturbation, np.random.default_rng(seed))
-        world.reset(start_qpos(model, layout, target.motion, contract.link_names, np.random.default_rng(seed)),
+        world.reset(start_qpos(model, layout, target.motion, np.random.default_rng(seed)),
                     target.motion.object_pos[0], target.motion.object_quat_wxyz[0])
         return world
 

@@ -1,6 +1,5 @@
 """The interaction environment composes its terms correctly on a small hand-built reference."""
 
-import numpy as np
 import pytest
 import torch
 
@@ -67,35 +66,6 @@ def test_step_shapes_rewards_and_logs(scene):
     assert env.w_d.sum(-1).allclose(torch.ones(8), atol=1e-5)
     pos_reward = torch.exp(-30.0 * env.reward_funcs["link_pos"][0](env))
     assert pos_reward.mean() > 0.5
-
-
-def test_a_stand_start_puts_its_feet_on_the_reference_feet(scene):
-    """A crouching frame 0 has its pelvis 6 cm behind the feet: the stand goes where the feet are (its own feet
-    centre on the reference's, within the spawn noise of 0), not under the reference's pelvis."""
-    from deploy.contract import FOOT_LINKS
-
-    ref = standing_reference(scene)
-    ref.robot_qpos[:, 0] -= 0.06  # the pelvis moved back, the feet (link_pos) kept
-    cfg = InteractionEnvCfg(num_envs=2, nthread=1, seed=3)
-    cfg.init.joint_noise = cfg.init.spawn_noise_xy = 0.0
-    cfg.init.stand_start_probability = 1.0
-    env = InteractionEnv(cfg, scene, [ref])
-    env.reset()
-    feet = [env.layout.link_names.index(name) for name in FOOT_LINKS]
-    sim_centre, ref_centre = env.link_pos[:, feet, :2].mean(1), ref.link_pos[0, feet, :2].mean(0)
-    assert (sim_centre - ref_centre).norm(dim=-1).max() < 0.005
-    assert (env.root_pos[:, 0] - ref.robot_qpos[0, 0]).min() > 0.05
-
-
-def test_stand_pelvis_xy_turns_the_stand_offset_to_the_heading():
-    from deploy.contract import stand_pelvis_xy
-
-    half = 0.5 ** 0.5
-    quarter_turn = np.array([half, 0.0, 0.0, half])  # wxyz, 90 degrees about z
-    x, y = stand_pelvis_xy(np.array([1.0, 2.0]), quarter_turn, np.array([0.02, 0.01]))
-    assert (x, y) == pytest.approx((1.0 + 0.01, 2.0 - 0.02))  # the offset (0.02, 0.01) turned to (-0.01, 0.02)
-    xt, yt = stand_pelvis_xy(torch.tensor([[1.0, 2.0]]), torch.as_tensor(quarter_turn)[None], torch.tensor([0.02, 0.01]))
-    assert (float(xt[0]), float(yt[0])) == pytest.approx((x, y))
 
 
 def test_warmup_holds_the_reference_clock(scene):

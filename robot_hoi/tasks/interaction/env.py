@@ -14,7 +14,7 @@ from types import SimpleNamespace
 import torch
 from torch import Tensor
 
-from deploy.contract import FOOT_LINKS, stand_pelvis_xy, warmup_offset
+from deploy.contract import warmup_offset
 from robot_hoi import termination
 from robot_hoi.errors import UserError
 from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg
@@ -29,7 +29,6 @@ from robot_hoi.tasks.interaction.reference import (
     object_points_world,
 )
 from robot_hoi.tasks.interaction.scene_setup import InteractionScene
-from robot_hoi.utils.mujoco_model import feet_centre_offset
 from robot_hoi.utils.timing import OFF
 from robot_hoi.utils.torch_rot import quat_apply, quat_apply_inverse, quat_mul, quat_to_matrix, yaw_quat
 
@@ -91,10 +90,6 @@ class InteractionEnv:
         lo, hi = scene.actuator_ctrlrange()
         self.ctrl_low, self.ctrl_high = as_tensor(lo), as_tensor(hi)
         self._default_robot_qpos = scene.default_robot_qpos().to(self.device)
-        self._stand_feet_offset = torch.as_tensor(feet_centre_offset(scene.model, self._default_robot_qpos[0].double()
-                                                                     .cpu().numpy(), FOOT_LINKS),
-                                                  dtype=torch.float32, device=self.device)
-        self._foot_links = [layout.link_names.index(name) for name in FOOT_LINKS]
         hand_joints = {c.joint for hand in emb.hands.values() for c in hand.channels}
         self.body_actuator_ids = [i for i, n in enumerate(layout.actuator_names) if n not in hand_joints]
         contact_index = {n: i for i, n in enumerate(layout.contact_names)}
@@ -505,15 +500,13 @@ class InteractionEnv:
         return torch.cat([qpos, qvel, obj], dim=1)
 
     def _stand_states(self, frames: Tensor) -> tuple[Tensor, Tensor]:
-        """Default standing robot at the reference root's heading, its feet centre on the frame's
-        (deploy.contract.stand_pelvis_xy), object at its reference pose."""
+        """Default standing robot at the reference root's place and heading, object at its reference pose."""
         n = frames.numel()
         lay = self.layout
         qpos = self._default_robot_qpos.repeat(n, 1)
         ref_root = self.ref_robot_qpos[frames]
         noise = self.cfg.init.spawn_noise_xy * (2 * torch.rand(n, 2, generator=self.generator, device=self.device) - 1)
-        feet = self.ref_link_pos[frames][:, self._foot_links, :2].mean(1)
-        qpos[:, 0:2] = torch.stack(stand_pelvis_xy(feet, ref_root[:, 3:7], self._stand_feet_offset), dim=-1) + noise
+        qpos[:, 0:2] = ref_root[:, 0:2] + noise
         qpos[:, 3:7] = quat_mul(yaw_quat(ref_root[:, 3:7]), qpos[:, 3:7])
         robot = torch.cat([qpos, torch.zeros(n, lay.robot_nv, device=self.device)], dim=1)
         obj = torch.cat([self.ref_object_pos[frames], self.ref_object_quat[frames],
