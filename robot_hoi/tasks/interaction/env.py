@@ -108,7 +108,6 @@ class InteractionEnv:
             self.backend.set_body_mass_levels(scene.object_body_id(), self.object_mass_levels.tolist())
             self.object_mass_levels = self.object_mass_levels.to(self.device)
         self.assist_level = assist_terms.assist_level(cfg.assist, 0)
-        self.thresholds = assist_terms.terminations_at(cfg.assist, cfg.terminations, self.assist_level)
         self.feet_link_mask = torch.zeros(layout.num_links, device=self.device)
         self.feet_link_mask[scene.feet_link_ids] = 1.0
         # an episode from the stand must be able to cover the longest clip plus its warmup
@@ -239,9 +238,9 @@ class InteractionEnv:
     def update_curriculum(self, total_samples: int) -> dict[str, float]:
         """Called by the runner before each iteration; returns what to log."""
         self.assist_level = assist_terms.assist_level(self.cfg.assist, total_samples)
-        self.thresholds = assist_terms.terminations_at(self.cfg.assist, self.cfg.terminations, self.assist_level)
+        thresholds = assist_terms.terminations_at(self.cfg.assist, self.cfg.terminations, self.assist_level)
         return {"Curriculum/assist_level": self.assist_level,
-                "Curriculum/object_termination_m": self.thresholds.max_mean_object_point_error}
+                "Curriculum/object_termination_m": thresholds.max_mean_object_point_error}
 
     def curriculum_state(self) -> dict[str, float]:
         """Saved with each checkpoint: the curriculum level reached."""
@@ -340,7 +339,8 @@ class InteractionEnv:
         return reference_frame(self, idx)
 
     def _terminations(self) -> dict[str, Tensor]:
-        return term_terms.interaction_terminations(self, self.thresholds)
+        thresholds = assist_terms.terminations_at(self.cfg.assist, self.cfg.terminations, self.assist_level)
+        return term_terms.interaction_terminations(self, thresholds)
 
     # ---- metrics ------------------------------------------------------------------------------------------------
     def _accumulate_metrics(self, tracking: Tensor) -> None:

@@ -28,7 +28,7 @@ def pd_wrench(pos: Tensor, quat: Tensor, lin_vel: Tensor, ang_vel: Tensor, ref_p
 def terminations_at(cfg, thresholds, level: float):
     """The termination thresholds at curriculum `level`: the object line widened by cfg.object_termination_margin x
     level (`thresholds` itself when there is nothing to widen)."""
-    margin = cfg.object_termination_margin * level if cfg.enabled else 0.0
+    margin = cfg.object_termination_margin * level
     if margin <= 0.0:
         return thresholds
     return replace(thresholds, max_mean_object_point_error=thresholds.max_mean_object_point_error + margin)
