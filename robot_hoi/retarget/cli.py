@@ -40,6 +40,10 @@ def register(subparsers) -> None:
                    help="fraction of the fingers' stroke closed while a hand holds (default 0.6; 0: flat hands that "
                         "still squeeze); training: --set env.retarget_finger_closure=F")
     add_clip_options(p, "--objects-dir")  # --objects-dir: the old spelling, kept working
+    p.add_argument("--object-collision", choices=("hull", "decomposed"), default="hull",
+                   help="what the object collides as: its convex hull or its convex pieces (CoACD; a hand reaches "
+                        "under a table's top); the IK keeps the hands out of it (training: --set "
+                        "env.object_collision=...) (default: hull)")
     p.add_argument("--json", action="store_true", help="print the report as JSON on stdout")
     p.set_defaults(func=run)
 
@@ -70,7 +74,8 @@ def run(args: argparse.Namespace) -> int:
     clip = _load(args)
     model = build_model(cfg)
     options = RetargetOptions()
-    options = replace(options, mapping=replace(options.mapping, anchor_mode=args.anchor_mode),
+    options = replace(options, mapping=replace(options.mapping, anchor_mode=args.anchor_mode,
+                                               object_collision=args.object_collision),
                       executable=replace(options.executable, compensate_leg_loads=args.leg_loads,
                                          compensate_dynamics=args.dynamics))
     if args.finger_closure is not None:
@@ -112,7 +117,9 @@ def _feasibility(clip, cfg, motion) -> dict:
     from robot_hoi.utils.config import load_yaml_dataclass
 
     report = kinematic_report(motion, cfg)
-    report["hold_test"] = hold_test(clip, load_yaml_dataclass(InteractionEnvCfg, TASK_CONFIG), cfg, motion)
+    task = load_yaml_dataclass(InteractionEnvCfg, TASK_CONFIG)
+    task.object_collision = motion.meta["mapping"]["object_collision"]  # the shape the retarget kept hands out of
+    report["hold_test"] = hold_test(clip, task, cfg, motion)
     return report
 
 

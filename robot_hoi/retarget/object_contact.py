@@ -1,10 +1,11 @@
-"""Keeping hands out of the object: its convex hull (what the simulation collides with) and hand probe points.
+"""Keeping hands out of the object: its collision shape (convex hull or convex pieces) and hand probe points.
 
-The simulation collides with the object's convex hull (robot_hoi.sim.scene), and the mocap hands often sink into
-the object (OMOMO fingertip joints sit 2-5 cm inside the box), so a reference state copied from them would start
-an episode with the fingers inside the hull. Two fixes use the hull's planes (n . x + d <= 0 inside, n outward):
-anchored targets are pushed out to a clearance (targets.py) and the IK pushes hand probe points out (ik.py).
-For a point inside a convex hull, max_k(n_k . x + d_k) is its exact signed distance; outside it is a lower bound.
+The simulation collides with the object's convex hull or its convex pieces (robot_hoi.sim.scene), and the mocap
+hands often sink into the object (OMOMO fingertip joints sit 2-5 cm inside the box), so a reference state copied
+from them would start an episode with the fingers inside it. Two fixes use the pieces' face planes
+(n . x + d <= 0 inside, n outward): anchored targets are pushed out to a clearance (targets.py) and the IK pushes
+hand probe points out (ik.py). For a point inside a convex piece, max_k(n_k . x + d_k) is its exact signed distance;
+outside it is a lower bound; over several pieces the smallest counts.
 """
 
 from __future__ import annotations
@@ -17,27 +18,48 @@ from scipy.spatial import ConvexHull
 
 @dataclass(frozen=True)
 class HullPlanes:
-    """Outward unit normals (K, 3) and offsets (K,) of a convex hull, in the object frame."""
+    """Face planes of the convex shape(s) the simulation collides with, in the object frame: outward unit normals
+    (K, 3) and offsets (K,), and the piece each plane bounds (K,) (all 0 for a single hull; a convex
+    decomposition has several pieces). A point's signed distance is its smallest over the pieces."""
 
     normals: np.ndarray
     offsets: np.ndarray
+    piece: np.ndarray | None = None
 
     @classmethod
     def from_vertices(cls, vertices: np.ndarray) -> HullPlanes:
-        eq = ConvexHull(np.asarray(vertices, dtype=np.float64)).equations
-        return cls(normals=eq[:, :3].copy(), offsets=eq[:, 3].copy())
+        return cls.from_pieces([vertices])
+
+    @classmethod
+    def from_pieces(cls, pieces: list[np.ndarray]) -> HullPlanes:
+        eqs = [ConvexHull(np.asarray(v, dtype=np.float64)).equations for v in pieces]
+        piece = np.concatenate([np.full(len(eq), i) for i, eq in enumerate(eqs)])
+        eq = np.concatenate(eqs)
+        return cls(normals=eq[:, :3].copy(), offsets=eq[:, 3].copy(), piece=piece)
 
     def signed_distance(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(..., 3) object-frame points -> (signed distance (...), index of the closest face plane (...))."""
         values = points @ self.normals.T + self.offsets
-        face = values.argmax(axis=-1)
-        return np.take_along_axis(values, face[..., None], axis=-1)[..., 0], face
+        starts = [0] if self.piece is None else np.flatnonzero(np.diff(self.piece, prepend=-1)).tolist()
+        best_dist = best_face = None
+        for start, stop in zip(starts, starts[1:] + [len(self.normals)], strict=True):  # nearest face of each piece
+            face = values[..., start:stop].argmax(axis=-1) + start
+            dist = np.take_along_axis(values, face[..., None], axis=-1)[..., 0]
+            if best_dist is None:
+                best_dist, best_face = dist, face
+            else:  # the nearest piece
+                closer = dist < best_dist
+                best_dist, best_face = np.where(closer, dist, best_dist), np.where(closer, face, best_face)
+        return best_dist, best_face
 
     def push_out(self, points: np.ndarray, clearance: float) -> np.ndarray:
-        """Points closer than `clearance` to the hull (or inside it) moved out along the nearest face normal."""
-        dist, face = self.signed_distance(points)
-        gap = np.maximum(clearance - dist, 0.0)
-        return points + gap[..., None] * self.normals[face]
+        """Points closer than `clearance` to the shape (or inside it) moved out along the nearest face normal
+        (of the nearest piece; a second pass for a point pushed into a neighbouring piece)."""
+        for _ in range(1 if self.piece is None or self.piece[-1] == 0 else 2):
+            dist, face = self.signed_distance(points)
+            gap = np.maximum(clearance - dist, 0.0)
+            points = points + gap[..., None] * self.normals[face]
+        return points
 
 
 @dataclass(frozen=True)

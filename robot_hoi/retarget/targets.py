@@ -40,6 +40,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from robot_hoi.data.objects import OBJECT_COLLISIONS
 from robot_hoi.errors import DataError
 from robot_hoi.retarget.object_contact import HullPlanes
 
@@ -93,6 +94,9 @@ class TargetMapping:
     # on the box's top edge with the palm off the face. With hand_size_fit, each hand's links are scaled about the
     # human palm (wrist-to-middle-knuckle midpoint) to the robot hand's size first, so the palms coincide.
     hand_size_fit: bool = True
+    # What the simulation collides with (and the IK keeps the hands out of): "hull", the mesh's convex hull, or
+    # "decomposed", its convex pieces (ObjectAsset.convex_parts), so a hand can reach under a table's top.
+    object_collision: str = "hull"
     group_weights: dict[str, float] = field(
         default_factory=lambda: {
             "pelvis": 3.0, "legs": 1.0, "feet": 2.0, "torso": 1.0, "head": 0.3,
@@ -105,6 +109,9 @@ class TargetMapping:
             raise DataError(f"anchor_mode must be 'distance' or 'contact', not '{self.anchor_mode}'")
         if self.anchor_radius <= 0:
             raise DataError(f"anchor_radius must be > 0, got {self.anchor_radius}")
+        if self.object_collision not in OBJECT_COLLISIONS:
+            raise DataError(f"object_collision must be one of {', '.join(OBJECT_COLLISIONS)}, not "
+                            f"'{self.object_collision}'")
         missing = set(GROUPS) - set(self.group_weights)
         if missing:
             raise DataError(f"group_weights lacks {sorted(missing)}")
@@ -129,7 +136,7 @@ class RobotTargets:
     human_object_pos: np.ndarray  # (T, 3) the object's real (human-space) position; orientation as object_quat
     object_points_local: np.ndarray  # (P, 3) object surface samples in the object frame
     object_local_distance: Callable[[np.ndarray], np.ndarray] | None = None  # dense surface distance, if known
-    object_hull: HullPlanes | None = None  # the object's convex hull (what the simulation collides with)
+    object_hull: HullPlanes | None = None  # what the simulation collides with (hull or pieces)
     object_mass_kg: float | None = None  # when the clip knows it (the synthetic boxes)
 
     def robot_surface_distance(self, points: np.ndarray) -> np.ndarray:
@@ -336,6 +343,8 @@ def targets_from_clip(clip, cfg, scale: float | None = None, mapping: TargetMapp
     local_distance = getattr(clip.object, "surface_distance", None)
     vertices = getattr(clip.object, "vertices", None)
     hull = HullPlanes.from_vertices(vertices) if vertices is not None and len(vertices) >= 4 else None
+    if hull is not None and mapping.object_collision != "hull":
+        hull = HullPlanes.from_pieces(clip.object.collision_pieces(mapping.object_collision))
     labels = getattr(clip, "body_contact", None)
     labels = None if labels is None else np.asarray(labels)[:, human_idx]
     human_pos = body_pos[:, human_idx]

@@ -52,18 +52,18 @@ def _hand_bodies(spec: mujoco.MjSpec, prefix: str) -> dict[str, str]:
 
 
 def add_object(spec: mujoco.MjSpec, vertices: np.ndarray, faces: np.ndarray, *, density: float, friction: float,
-               contype: int, conaffinity: int, mass: float | None = None, torsional_friction: float = 0.0) -> None:
-    """The object as one convex hull of its mesh with a free joint (InterMimic: density 200, friction 0.9).
+               contype: int, conaffinity: int, mass: float | None = None, torsional_friction: float = 0.0,
+               pieces: list[np.ndarray] | None = None) -> None:
+    """The object with a free joint, colliding as one convex hull of its mesh or, given `pieces` (vertices of
+    convex parts, e.g. ObjectAsset.convex_parts()), as their union (InterMimic: density 200, friction 0.9).
 
-    `mass`, when known, overrides the density (the hull is solid; a real box is hollow and much lighter).
-    `torsional_friction` (m) > 0 gives its contacts torsional friction (condim 4): a palm's contact patch resists the
-    object turning about the palm's normal, which MuJoCo's point contacts (condim 3) do not."""
+    The mass and inertia are the solid hull's at `density` either way, so the choice of collision shape does not
+    change the object's weight. `mass`, when known, overrides the density (the hull is solid; a real box is hollow
+    and much lighter). `torsional_friction` (m) > 0 gives its contacts torsional friction (condim 4): a palm's contact
+    patch resists the object turning about the palm's normal, which MuJoCo's point contacts (condim 3) do not."""
     hull = trimesh.Trimesh(vertices=vertices, faces=faces, process=True).convex_hull
     if mass is not None:
         density = mass / hull.volume
-    mesh = spec.add_mesh(name="object_hull")
-    mesh.uservert = np.asarray(hull.vertices, dtype=np.float32).ravel()
-    mesh.userface = np.asarray(hull.faces, dtype=np.int32).ravel()
     # Explicit mass properties of the hull at `density`: the robot's spec does not infer inertia from geoms.
     hull.density = density
     inertia = hull.moment_inertia
@@ -73,9 +73,20 @@ def add_object(spec: mujoco.MjSpec, vertices: np.ndarray, faces: np.ndarray, *, 
     body.ipos = np.asarray(hull.center_mass, dtype=np.float64)
     body.fullinertia = [inertia[0, 0], inertia[1, 1], inertia[2, 2], inertia[0, 1], inertia[0, 2], inertia[1, 2]]
     body.add_freejoint(name=OBJECT_JOINT)
-    body.add_geom(type=mujoco.mjtGeom.mjGEOM_MESH, meshname="object_hull", density=density,
-                  friction=[friction, torsional_friction or 0.005, 0.0001], condim=4 if torsional_friction > 0 else 3,
-                  contype=contype, conaffinity=conaffinity, rgba=[0.8, 0.55, 0.3, 1.0])
+    if pieces is None:
+        shapes = [(np.asarray(hull.vertices), np.asarray(hull.faces))]
+    else:  # MuJoCo takes the convex hull of a mesh given by its vertices alone
+        shapes = [(np.asarray(p, dtype=np.float64), None) for p in pieces]
+    for i, (shape, shape_faces) in enumerate(shapes):
+        name = "object_hull" if pieces is None else f"object_piece_{i}"
+        mesh = spec.add_mesh(name=name)
+        mesh.uservert = shape.astype(np.float32).ravel()
+        if shape_faces is not None:
+            mesh.userface = shape_faces.astype(np.int32).ravel()
+        body.add_geom(type=mujoco.mjtGeom.mjGEOM_MESH, meshname=name, density=density,
+                      friction=[friction, torsional_friction or 0.005, 0.0001],
+                      condim=4 if torsional_friction > 0 else 3,
+                      contype=contype, conaffinity=conaffinity, rgba=[0.8, 0.55, 0.3, 1.0])
 
 
 def add_sensors(spec: mujoco.MjSpec, link_map: dict[str, str]) -> list[str]:

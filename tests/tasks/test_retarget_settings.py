@@ -68,3 +68,20 @@ def test_flat_fingers_keep_the_squeeze_and_dynamics_move_the_targets(tmp_path):
     with pytest.raises(UserError, match=r"finger closure 0, the task asks for it 0.6 \(retarget_finger_closure\)"):
         factory.make_env([clip], InteractionEnvCfg(num_envs=2, backend="cpu", retarget_dynamics=True),
                          embodiment, cache=tmp_path)
+
+
+def test_object_collision_reaches_the_scene_and_guards_the_cache(tmp_path, table_object):
+    """object_collision "decomposed": the simulated object is its convex pieces, the retarget kept the hands out of
+    the same pieces, and a cache made with them is refused by a task that collides with the hull."""
+    embodiment = load_embodiment("g1_inspire")
+    clip = replace(factory.load_source("embedded:lift_place"), object=table_object)
+    cfg = InteractionEnvCfg(num_envs=2, backend="cpu", object_collision="decomposed")
+    env = factory.make_env([clip], cfg, embodiment, cache=tmp_path)
+    model = env.scene.model
+    object_body = model.jnt_bodyid[model.njnt - 1]
+    assert model.body_geomnum[object_body] == len(clip.object.convex_parts()) > 1
+    cached = tmp_path / f"{clip.name}.npz"
+    with pytest.raises(UserError, match=rf"{cached.name}.*object collision shape decomposed.*asks for it hull"):
+        factory.make_env([clip], InteractionEnvCfg(num_envs=2, backend="cpu"), embodiment, cache=tmp_path)
+    with pytest.raises(ValueError, match="object_collision must be one of hull, decomposed, not 'mesh'"):
+        InteractionEnvCfg(object_collision="mesh")

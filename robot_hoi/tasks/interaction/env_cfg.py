@@ -129,6 +129,10 @@ class InteractionEnvCfg:
     retarget_dynamics: bool = False
     # fraction of the fingers' open->closed stroke while a hand holds (None: the retarget's GraspRule default, 0.6)
     retarget_finger_closure: float | None = None
+    # what the object collides as: "hull" (its convex hull; checkpoints without the key) | "decomposed" (its convex
+    # pieces, ObjectAsset.convex_parts: a hand reaches under a table's top). The retarget keeps the hands out of
+    # the same shape; recorded in the cached retarget like leg loads
+    object_collision: str = "hull"
     object_density: float = 25.0            # kg/m^3 of the hull (InterMimic's G1 setting); a known mass wins
     object_friction: float = 0.9            # supp. Table A
     object_torsional_friction: float = 0.0  # m; > 0: the object's contacts resist turning about their normal
@@ -158,6 +162,11 @@ class InteractionEnvCfg:
     success_max_link_error: float = 0.15
 
     def __post_init__(self) -> None:
+        from robot_hoi.data.objects import OBJECT_COLLISIONS
+
+        if self.object_collision not in OBJECT_COLLISIONS:
+            raise ValueError(f"object_collision must be one of {', '.join(OBJECT_COLLISIONS)}, not "
+                             f"'{self.object_collision}'")
         if self.reward_set:
             apply_reward_set(self, self.reward_set)
             self.reward_set = None

@@ -91,6 +91,7 @@ _RETARGET_SETTINGS = (
     ("retarget_leg_loads", ("executable", "compensate_leg_loads"), "leg-load compensation"),
     ("retarget_dynamics", ("executable", "compensate_dynamics"), "dynamics compensation"),
     ("retarget_finger_closure", ("grasp", "closure"), "finger closure"),
+    ("object_collision", ("mapping", "object_collision"), "object collision shape"),
 )
 
 
@@ -147,6 +148,8 @@ def load_or_retarget(clip, embodiment, cache: Path | None, options=None):
 
 
 def _setting(value) -> str:
+    if isinstance(value, str):
+        return value
     return ("on" if value else "off") if isinstance(value, bool) else f"{value:g}"
 
 
@@ -176,7 +179,8 @@ def make_env(clips: list, env_cfg: InteractionEnvCfg, embodiment, cache: Path | 
         raise UserError(f"clip {clips[0].name}: no object mesh loaded; the simulation needs it")
     scene = InteractionScene(embodiment, clips[0].object, self_collision=env_cfg.self_collision,
                              density=env_cfg.object_density, friction=env_cfg.object_friction,
-                             torsional_friction=env_cfg.object_torsional_friction)
+                             torsional_friction=env_cfg.object_torsional_friction,
+                             object_collision=env_cfg.object_collision)
     motions = motions or [load_or_retarget(c, embodiment, cache, retarget_options(env_cfg)) for c in clips]
     references = [build_reference(c, m, env_cfg.reference_links) for c, m in zip(clips, motions, strict=True)]
     env = InteractionEnv(env_cfg, scene, references)

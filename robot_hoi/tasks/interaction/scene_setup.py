@@ -16,7 +16,8 @@ HAND_LINK_MARKERS = ("_tip", "hand_base")
 
 class InteractionScene:
     def __init__(self, embodiment, object_asset, *, self_collision: bool = False, density: float = 25.0,
-                 friction: float = 0.9, torsional_friction: float = 0.0, timestep: float | None = None):
+                 friction: float = 0.9, torsional_friction: float = 0.0, timestep: float | None = None,
+                 object_collision: str = "hull"):
         from robot_hoi.embodiment import build_robot_spec
 
         self.embodiment = embodiment
@@ -25,7 +26,8 @@ class InteractionScene:
         contype, conaffinity = world_bits()
         add_object(spec, np.asarray(object_asset.vertices), np.asarray(object_asset.faces), density=density,
                    friction=friction, contype=contype, conaffinity=conaffinity,
-                   mass=getattr(object_asset, "mass_kg", None), torsional_friction=torsional_friction)
+                   mass=getattr(object_asset, "mass_kg", None), torsional_friction=torsional_friction,
+                   pieces=None if object_collision == "hull" else object_asset.collision_pieces(object_collision))
         contact_names = add_sensors(spec, dict(embodiment.link_map))
         if timestep is not None:
             spec.option.timestep = timestep
