@@ -40,10 +40,10 @@ def register(subparsers) -> None:
                    help="fraction of the fingers' stroke closed while a hand holds (default 0.6; 0: flat hands that "
                         "still squeeze); training: --set env.retarget_finger_closure=F")
     add_clip_options(p, "--objects-dir")  # --objects-dir: the old spelling, kept working
-    p.add_argument("--object-collision", choices=("hull", "decomposed"), default="hull",
+    p.add_argument("--object-collision", choices=("hull", "decomposed"), default=None,
                    help="what the object collides as: its convex hull or its convex pieces (CoACD; a hand reaches "
-                        "under a table's top); the IK keeps the hands out of it (training: --set "
-                        "env.object_collision=...) (default: hull)")
+                        "under a table's top); the IK keeps the hands out of it (default: the task's "
+                        "env.object_collision, configs/tasks/interaction.yaml)")
     p.add_argument("--json", action="store_true", help="print the report as JSON on stdout")
     p.set_defaults(func=run)
 
@@ -74,8 +74,9 @@ def run(args: argparse.Namespace) -> int:
     clip = _load(args)
     model = build_model(cfg)
     options = RetargetOptions()
+    object_collision = args.object_collision or _task().object_collision
     options = replace(options, mapping=replace(options.mapping, anchor_mode=args.anchor_mode,
-                                               object_collision=args.object_collision),
+                                               object_collision=object_collision),
                       executable=replace(options.executable, compensate_leg_loads=args.leg_loads,
                                          compensate_dynamics=args.dynamics))
     if args.finger_closure is not None:
@@ -110,17 +111,23 @@ def run(args: argparse.Namespace) -> int:
 
 def _feasibility(clip, cfg, motion) -> dict:
     """Can the robot execute it: kinematic figures and the hold test (a root-held replay in the training scene)."""
-    from robot_hoi.rl.eval_cli import TASK_CONFIG
-    from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg
     from robot_hoi.tasks.interaction.factory import kinematic_report
     from robot_hoi.tasks.interaction.feasibility import hold_test
-    from robot_hoi.utils.config import load_yaml_dataclass
 
     report = kinematic_report(motion, cfg)
-    task = load_yaml_dataclass(InteractionEnvCfg, TASK_CONFIG)
+    task = _task()
     task.object_collision = motion.meta["mapping"]["object_collision"]  # the shape the retarget kept hands out of
     report["hold_test"] = hold_test(clip, task, cfg, motion)
     return report
+
+
+def _task():
+    """The task's settings (configs/tasks/interaction.yaml)."""
+    from robot_hoi.rl.eval_cli import TASK_CONFIG
+    from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg
+    from robot_hoi.utils.config import load_yaml_dataclass
+
+    return load_yaml_dataclass(InteractionEnvCfg, TASK_CONFIG)
 
 
 def format_feasibility(f: dict) -> str:

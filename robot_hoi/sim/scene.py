@@ -73,12 +73,12 @@ def add_object(spec: mujoco.MjSpec, vertices: np.ndarray, faces: np.ndarray, *, 
     body.ipos = np.asarray(hull.center_mass, dtype=np.float64)
     body.fullinertia = [inertia[0, 0], inertia[1, 1], inertia[2, 2], inertia[0, 1], inertia[0, 2], inertia[1, 2]]
     body.add_freejoint(name=OBJECT_JOINT)
-    if pieces is None:
+    if pieces is None or len(pieces) == 1:  # a convex object is its hull
         shapes = [(np.asarray(hull.vertices), np.asarray(hull.faces))]
     else:  # MuJoCo takes the convex hull of a mesh given by its vertices alone
         shapes = [(np.asarray(p, dtype=np.float64), None) for p in pieces]
     for i, (shape, shape_faces) in enumerate(shapes):
-        name = "object_hull" if pieces is None else f"object_piece_{i}"
+        name = "object_hull" if len(shapes) == 1 else f"object_piece_{i}"
         mesh = spec.add_mesh(name=name)
         mesh.uservert = shape.astype(np.float32).ravel()
         if shape_faces is not None:

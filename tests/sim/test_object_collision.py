@@ -44,6 +44,10 @@ def test_a_convex_object_is_its_own_single_piece():
     np.testing.assert_allclose(np.sort(piece, axis=0), np.sort(box.hull_vertices(), axis=0))
     with pytest.raises(DataError, match="object_collision must be one of hull, decomposed"):
         box.collision_pieces("mesh")
+    # "decomposed" builds the very same simulated box as "hull" (the shipped policies were trained on the hull)
+    models = [_scene(box, pieces)[0] for pieces in (None, box.collision_pieces("decomposed"))]
+    for field in ("geom_size", "geom_rbound", "mesh_vert", "body_mass", "body_inertia"):
+        np.testing.assert_array_equal(getattr(models[0], field), getattr(models[1], field))
 
 
 def _scene(table: ObjectAsset, pieces):
