@@ -48,7 +48,7 @@ def build_scene_bytes(embodiment: str, object_asset, *, self_collision: bool = T
     add_object(spec, np.asarray(object_asset.vertices), np.asarray(object_asset.faces), density=density,
                friction=friction, contype=contype, conaffinity=conaffinity,
                mass=getattr(object_asset, "mass_kg", None), torsional_friction=torsional_friction,
-               pieces=None if object_collision == "hull" else object_asset.collision_pieces(object_collision))
+               pieces=object_asset.collision_pieces(object_collision))
     add_sensors(spec, dict(cfg.link_map))
     spec.add_equality(name=GANTRY, type=mujoco.mjtEq.mjEQ_WELD, objtype=mujoco.mjtObj.mjOBJ_BODY,
                       name1="world", name2=PELVIS, data=[0.0] * 3 + [0.0, 0.0, cfg.spawn_height, 1.0, 0.0, 0.0, 0.0]

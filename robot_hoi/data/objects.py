@@ -76,9 +76,7 @@ class ObjectAsset:
 
     def collision_pieces(self, object_collision: str) -> list[np.ndarray]:
         """Vertices of the convex shapes the object collides as: [its hull] or its convex_parts()."""
-        if object_collision not in OBJECT_COLLISIONS:
-            raise DataError(f"object_collision must be one of {', '.join(OBJECT_COLLISIONS)}, not "
-                            f"'{object_collision}'")
+        check_object_collision(object_collision)
         return self.convex_parts() if object_collision == "decomposed" else [self.hull_vertices()]
 
     def surface_distance(self, points_local: np.ndarray) -> np.ndarray:
@@ -104,6 +102,12 @@ def to_local(points_world: np.ndarray, pos: np.ndarray, quat_xyzw: np.ndarray) -
     """World points (T, N, 3) -> object-local points (T, N, 3) for poses (T,)."""
     mats = Rotation.from_quat(quat_xyzw).as_matrix()
     return np.einsum("tji,tnj->tni", mats, points_world - np.asarray(pos)[:, None, :])
+
+
+def check_object_collision(value: str, error: type[Exception] = DataError) -> None:
+    """Raise `error` unless `value` names one of OBJECT_COLLISIONS."""
+    if value not in OBJECT_COLLISIONS:
+        raise error(f"object_collision must be one of {', '.join(OBJECT_COLLISIONS)}, not '{value}'")
 
 
 def _decompose(vertices: np.ndarray, faces: np.ndarray) -> list[np.ndarray]:

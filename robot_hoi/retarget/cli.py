@@ -69,14 +69,18 @@ def run(args: argparse.Namespace) -> int:
     from robot_hoi.retarget.hands import check_closure
     from robot_hoi.retarget.pipeline import RetargetOptions, retarget_clip
     from robot_hoi.retarget.report import build_report, format_report
+    from robot_hoi.rl.eval_cli import TASK_CONFIG
+    from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg
+    from robot_hoi.utils.config import load_yaml_dataclass
 
     cfg = load_embodiment(args.embodiment)
     clip = _load(args)
     model = build_model(cfg)
     options = RetargetOptions()
-    object_collision = args.object_collision or _task().object_collision
+    task = load_yaml_dataclass(InteractionEnvCfg, TASK_CONFIG)  # the task's settings
+    task.object_collision = args.object_collision or task.object_collision  # the hold test collides with it too
     options = replace(options, mapping=replace(options.mapping, anchor_mode=args.anchor_mode,
-                                               object_collision=object_collision),
+                                               object_collision=task.object_collision),
                       executable=replace(options.executable, compensate_leg_loads=args.leg_loads,
                                          compensate_dynamics=args.dynamics))
     if args.finger_closure is not None:
@@ -85,7 +89,7 @@ def run(args: argparse.Namespace) -> int:
     result = retarget_clip(clip, cfg, model, scale=args.scale, options=options)
     report = build_report(result)
     report["clip"] = clip.name
-    report["feasibility"] = _feasibility(clip, cfg, result.motion)
+    report["feasibility"] = _feasibility(clip, cfg, result.motion, task)
     result.motion.meta["report"] = report
     result.motion.meta["feasibility"] = report["feasibility"]
     npz, sidecar = result.motion.save(out)
@@ -109,25 +113,14 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _feasibility(clip, cfg, motion) -> dict:
+def _feasibility(clip, cfg, motion, task) -> dict:
     """Can the robot execute it: kinematic figures and the hold test (a root-held replay in the training scene)."""
     from robot_hoi.tasks.interaction.factory import kinematic_report
     from robot_hoi.tasks.interaction.feasibility import hold_test
 
     report = kinematic_report(motion, cfg)
-    task = _task()
-    task.object_collision = motion.meta["mapping"]["object_collision"]  # the shape the retarget kept hands out of
     report["hold_test"] = hold_test(clip, task, cfg, motion)
     return report
-
-
-def _task():
-    """The task's settings (configs/tasks/interaction.yaml)."""
-    from robot_hoi.rl.eval_cli import TASK_CONFIG
-    from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg
-    from robot_hoi.utils.config import load_yaml_dataclass
-
-    return load_yaml_dataclass(InteractionEnvCfg, TASK_CONFIG)
 
 
 def format_feasibility(f: dict) -> str:

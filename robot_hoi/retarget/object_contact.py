@@ -19,12 +19,12 @@ from scipy.spatial import ConvexHull
 @dataclass(frozen=True)
 class HullPlanes:
     """Face planes of the convex shape(s) the simulation collides with, in the object frame: outward unit normals
-    (K, 3) and offsets (K,), and the piece each plane bounds (K,) (all 0 for a single hull; a convex
-    decomposition has several pieces). A point's signed distance is its smallest over the pieces."""
+    (K, 3) and offsets (K,), piece by piece (piece i's planes start at row piece_starts[i]; one hull is one piece).
+    A point's signed distance is its smallest over the pieces."""
 
     normals: np.ndarray
     offsets: np.ndarray
-    piece: np.ndarray | None = None
+    piece_starts: tuple[int, ...] = (0,)
 
     @classmethod
     def from_vertices(cls, vertices: np.ndarray) -> HullPlanes:
@@ -33,16 +33,16 @@ class HullPlanes:
     @classmethod
     def from_pieces(cls, pieces: list[np.ndarray]) -> HullPlanes:
         eqs = [ConvexHull(np.asarray(v, dtype=np.float64)).equations for v in pieces]
-        piece = np.concatenate([np.full(len(eq), i) for i, eq in enumerate(eqs)])
+        starts = tuple(int(s) for s in np.cumsum([0] + [len(eq) for eq in eqs[:-1]]))
         eq = np.concatenate(eqs)
-        return cls(normals=eq[:, :3].copy(), offsets=eq[:, 3].copy(), piece=piece)
+        return cls(normals=eq[:, :3].copy(), offsets=eq[:, 3].copy(), piece_starts=starts)
 
     def signed_distance(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(..., 3) object-frame points -> (signed distance (...), index of the closest face plane (...))."""
         values = points @ self.normals.T + self.offsets
-        starts = [0] if self.piece is None else np.flatnonzero(np.diff(self.piece, prepend=-1)).tolist()
+        stops = self.piece_starts[1:] + (len(self.normals),)
         best_dist = best_face = None
-        for start, stop in zip(starts, starts[1:] + [len(self.normals)], strict=True):  # nearest face of each piece
+        for start, stop in zip(self.piece_starts, stops, strict=True):  # the nearest face of each piece
             face = values[..., start:stop].argmax(axis=-1) + start
             dist = np.take_along_axis(values, face[..., None], axis=-1)[..., 0]
             if best_dist is None:
@@ -55,7 +55,7 @@ class HullPlanes:
     def push_out(self, points: np.ndarray, clearance: float) -> np.ndarray:
         """Points closer than `clearance` to the shape (or inside it) moved out along the nearest face normal
         (of the nearest piece; a second pass for a point pushed into a neighbouring piece)."""
-        for _ in range(1 if self.piece is None or self.piece[-1] == 0 else 2):
+        for _ in range(1 if len(self.piece_starts) == 1 else 2):
             dist, face = self.signed_distance(points)
             gap = np.maximum(clearance - dist, 0.0)
             points = points + gap[..., None] * self.normals[face]

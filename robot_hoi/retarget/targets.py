@@ -40,7 +40,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from robot_hoi.data.objects import OBJECT_COLLISIONS
+from robot_hoi.data.objects import check_object_collision
 from robot_hoi.errors import DataError
 from robot_hoi.retarget.object_contact import HullPlanes
 
@@ -109,9 +109,7 @@ class TargetMapping:
             raise DataError(f"anchor_mode must be 'distance' or 'contact', not '{self.anchor_mode}'")
         if self.anchor_radius <= 0:
             raise DataError(f"anchor_radius must be > 0, got {self.anchor_radius}")
-        if self.object_collision not in OBJECT_COLLISIONS:
-            raise DataError(f"object_collision must be one of {', '.join(OBJECT_COLLISIONS)}, not "
-                            f"'{self.object_collision}'")
+        check_object_collision(self.object_collision)
         missing = set(GROUPS) - set(self.group_weights)
         if missing:
             raise DataError(f"group_weights lacks {sorted(missing)}")
@@ -342,9 +340,10 @@ def targets_from_clip(clip, cfg, scale: float | None = None, mapping: TargetMapp
     points_local = np.asarray(clip.object.sample_points, dtype=np.float64)
     local_distance = getattr(clip.object, "surface_distance", None)
     vertices = getattr(clip.object, "vertices", None)
-    hull = HullPlanes.from_vertices(vertices) if vertices is not None and len(vertices) >= 4 else None
-    if hull is not None and mapping.object_collision != "hull":
-        hull = HullPlanes.from_pieces(clip.object.collision_pieces(mapping.object_collision))
+    hull = None
+    if vertices is not None and len(vertices) >= 4:
+        hull = (HullPlanes.from_vertices(vertices) if mapping.object_collision == "hull"
+                else HullPlanes.from_pieces(clip.object.collision_pieces(mapping.object_collision)))
     labels = getattr(clip, "body_contact", None)
     labels = None if labels is None else np.asarray(labels)[:, human_idx]
     human_pos = body_pos[:, human_idx]

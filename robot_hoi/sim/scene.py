@@ -73,7 +73,7 @@ def add_object(spec: mujoco.MjSpec, vertices: np.ndarray, faces: np.ndarray, *, 
     body.ipos = np.asarray(hull.center_mass, dtype=np.float64)
     body.fullinertia = [inertia[0, 0], inertia[1, 1], inertia[2, 2], inertia[0, 1], inertia[0, 2], inertia[1, 2]]
     body.add_freejoint(name=OBJECT_JOINT)
-    if pieces is None or len(pieces) == 1:  # a convex object is its hull
+    if pieces is None or len(pieces) == 1:  # one piece: the object's own hull (a convex object, or "hull")
         shapes = [(np.asarray(hull.vertices), np.asarray(hull.faces))]
     else:  # MuJoCo takes the convex hull of a mesh given by its vertices alone
         shapes = [(np.asarray(p, dtype=np.float64), None) for p in pieces]

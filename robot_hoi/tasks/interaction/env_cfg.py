@@ -162,11 +162,9 @@ class InteractionEnvCfg:
     success_max_link_error: float = 0.15
 
     def __post_init__(self) -> None:
-        from robot_hoi.data.objects import OBJECT_COLLISIONS
+        from robot_hoi.data.objects import check_object_collision
 
-        if self.object_collision not in OBJECT_COLLISIONS:
-            raise ValueError(f"object_collision must be one of {', '.join(OBJECT_COLLISIONS)}, not "
-                             f"'{self.object_collision}'")
+        check_object_collision(self.object_collision, ValueError)  # the config loader names the file
         if self.reward_set:
             apply_reward_set(self, self.reward_set)
             self.reward_set = None

@@ -27,7 +27,7 @@ class InteractionScene:
         add_object(spec, np.asarray(object_asset.vertices), np.asarray(object_asset.faces), density=density,
                    friction=friction, contype=contype, conaffinity=conaffinity,
                    mass=getattr(object_asset, "mass_kg", None), torsional_friction=torsional_friction,
-                   pieces=None if object_collision == "hull" else object_asset.collision_pieces(object_collision))
+                   pieces=object_asset.collision_pieces(object_collision))
         contact_names = add_sensors(spec, dict(embodiment.link_map))
         if timestep is not None:
             spec.option.timestep = timestep
