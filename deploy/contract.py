@@ -38,6 +38,11 @@ unquoted string is accepted too)
                                                the target offset glides from default_pose (tick 0) to frame 0's
                                                joints, warmup_offset(); false: frame 0's joints from tick 0
     data                {"clips": [...], "license": str}
+    task                {"env": {...}} | null  optional, default null: the training task's environment config
+                                               (robot_hoi's InteractionEnvCfg as a dict: object density, friction
+                                               and collision shape, termination thresholds, success bounds), so a
+                                               simulated validation rebuilds the world the policy learnt in. The
+                                               runtime does not read it.
 
 Observation terms (name: size with A actuators, B = A - 12 body joints, K keyframes, L links) are defined in
 deploy.observations with their exact math; sizes are fixed here so a file can be checked without building them.
@@ -173,6 +178,7 @@ class PolicyContract:
     action_offset_mode: str = "fixed"
     warmup_frames: int = 0
     warmup_blend: bool = False
+    task: dict | None = None
 
     @property
     def num_actions(self) -> int:
@@ -255,6 +261,8 @@ class PolicyContract:
             "warmup_frames": int(self.warmup_frames),
             "warmup_blend": bool(self.warmup_blend),
         }
+        if self.task is not None:
+            values["task"] = self.task
         return {key: json.dumps(value) for key, value in values.items()}
 
     @classmethod
@@ -404,7 +412,11 @@ def _parse(metadata: dict[str, str], source: str) -> PolicyContract:
     blend = _optional_json(metadata, "warmup_blend", False, fail)
     if not isinstance(blend, bool):
         raise fail("warmup_blend", f"must be true or false, got {blend!r}")
+    task = _optional_json(metadata, "task", None, fail)
+    if task is not None and not (isinstance(task, dict) and isinstance(task.get("env"), dict)):
+        raise fail("task", "must be null or {'env': {...}} (the training task's environment config)")
     return PolicyContract(
+        task=task,
         action_offset_mode=offset_mode,
         warmup_frames=warmup,
         warmup_blend=blend,

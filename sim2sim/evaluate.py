@@ -147,12 +147,11 @@ def evaluate(o: Sim2SimOptions) -> tuple[dict, dict[str, Path]]:
         entry.targets = (clip_targets(entry.contract, o.clips, o.embodiment, o.self_collision, o.clip_options)
                          if o.clips else
                          policy_targets(entry.contract, o.motion, o.embodiment, o.self_collision, o.clip_options))
-    task = task_config()
-    thresholds = Thresholds(**{k: getattr(task.terminations, k) for k in Thresholds.__dataclass_fields__})
-    success_bounds = (task.success_max_object_error, task.success_max_link_error)
-
     jobs = []
     for entry in entries:
+        task = task_config(entry.contract)  # each policy's episodes end and succeed by the rules it learnt with
+        thresholds = Thresholds(**{k: getattr(task.terminations, k) for k in Thresholds.__dataclass_fields__})
+        success_bounds = (task.success_max_object_error, task.success_max_link_error)
         for target in entry.targets:
             max_frames = None if o.seconds is None else max(1, int(round(o.seconds * target.motion.fps)))
             for pi, perturbation in enumerate(perturbations):

@@ -7,7 +7,8 @@ It plugs into the unchanged runtime through two of deploy's own seams:
     - around the ONNX policy (MonitoredPolicy): at policy tick t the world holds the state reached after t
       actions, which is compared with the reference frame of tick t (f(t) = t - warmup_frames, held at 0 during
       the policy's warmup, as the runtime's observation does); InterMimic's early-termination conditions (the
-      thresholds of configs/tasks/interaction.yaml) end the episode as they end a training episode.
+      thresholds the policy was trained with: its metadata's task, else configs/tasks/interaction.yaml) end the
+      episode as they end a training episode.
 """
 
 from __future__ import annotations

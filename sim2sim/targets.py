@@ -36,12 +36,15 @@ class EvalTarget:
                 "license": self.license, "motion": self.motion.source}
 
 
-def task_config():
-    """The interaction task config training used (configs/tasks/interaction.yaml)."""
+def task_config(contract=None):
+    """The interaction task config the policy was trained with: the one its metadata records (contract.task), else
+    (files exported before it was recorded) configs/tasks/interaction.yaml."""
     from robot_hoi.paths import CONFIGS_DIR
     from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg
-    from robot_hoi.utils.config import load_yaml_dataclass
+    from robot_hoi.utils.config import load_dataclass, load_yaml_dataclass
 
+    if contract is not None and contract.task is not None:
+        return load_dataclass(InteractionEnvCfg, contract.task["env"], f"{contract.source} metadata 'task'")
     return load_yaml_dataclass(InteractionEnvCfg, CONFIGS_DIR / "tasks" / "interaction.yaml")
 
 
@@ -100,7 +103,8 @@ def policy_targets(contract, motion_path: str | None, embodiment: str, self_coll
         raise UserError(f"{contract.source}: metadata names no clip to take the object from; pass --clips")
     if not source.startswith("embedded:") and not Path(source).is_file():
         raise UserError(f"{contract.source}: its clip {source} is not on this machine; pass --clips CLIP")
-    return [_target(load_source(source, clip_options), source, motion, embodiment, self_collision, task_config())]
+    return [_target(load_source(source, clip_options), source, motion, embodiment, self_collision,
+                    task_config(contract))]
 
 
 def clip_targets(contract, sources: list[str], embodiment: str, self_collision: bool,
@@ -118,7 +122,7 @@ def clip_targets(contract, sources: list[str], embodiment: str, self_collision: 
     )
     from robot_hoi.tasks.interaction.reference import build_reference
 
-    env_cfg = task_config()
+    env_cfg = task_config(contract)
     cfg = load_embodiment(embodiment)
     targets = []
     for source in expand_sources(sources):

@@ -95,7 +95,7 @@ def run_onnx(args: argparse.Namespace) -> int:
         embodiment, build_model(embodiment), policy_kind="teacher", obs_spec=teacher_observation_spec(env),
         keyframes=env_cfg.keyframes, action_clip=env_cfg.action_clip,
         clips=[clip_identity(c, s) for c, s in zip(clips, task["sources"], strict=True)],
-        **offset_settings(env_cfg),
+        **offset_settings(env_cfg), env_cfg=env_cfg,
     )
     report = export_policy(model.exported_policy(), model.num_actor_obs, metadata, out, recorded_obs=recorded_obs)
     for line in report.lines():
@@ -188,7 +188,7 @@ def run_untrained(args: argparse.Namespace) -> int:
         keyframes=env_cfg.student_keyframes, action_clip=env_cfg.action_clip,
         clips=[clip_identity(clip, sources[0])],
         reference={"file": motion_file.name, "sha256": file_sha256(motion_file)},
-        **offset_settings(env_cfg),
+        **offset_settings(env_cfg), env_cfg=env_cfg,
     )
     report = export_policy(model.exported_policy(), env.obs_dims["student"], metadata, out, recorded_obs=recorded)
     for line in report.lines():

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import mujoco
 import numpy as np
 
@@ -19,11 +21,14 @@ def actuator_limits(model: mujoco.MjModel, names) -> tuple[np.ndarray, np.ndarra
 
 def policy_metadata(embodiment, model: mujoco.MjModel, *, policy_kind: str, obs_spec: list[dict],
                     keyframes, action_clip: float, clips: list[dict], reference: dict | None = None,
-                    action_offset_mode: str = "fixed", warmup_frames: int = 0, warmup_blend: bool = False) -> dict:
+                    action_offset_mode: str = "fixed", warmup_frames: int = 0, warmup_blend: bool = False,
+                    env_cfg=None) -> dict:
     """`action_offset_mode` "reference": the PD target offset is the reference motion's joint_pos at the frame
     being stepped to (tick t targets frame f(t + 1)), not `action_offset`; `warmup_frames`: the reference clock
     holds frame 0 for this many policy ticks (the stand-and-approach warmup the policy was trained with);
-    `warmup_blend`: the offset glides in from the default pose over the warmup (deploy.contract.warmup_offset)."""
+    `warmup_blend`: the offset glides in from the default pose over the warmup (deploy.contract.warmup_offset).
+    `env_cfg`: the training task's InteractionEnvCfg, written as the "task" key so sim2sim rebuilds the world
+    (object shape, density, friction) and the episode rules the policy learnt with, not today's YAML defaults."""
     names = list(embodiment.actuator_names)
     lower, upper, effort = actuator_limits(model, names)
     licenses = sorted({c.get("license") or "unknown" for c in clips})
@@ -53,6 +58,7 @@ def policy_metadata(embodiment, model: mujoco.MjModel, *, policy_kind: str, obs_
         "link_names": list(embodiment.link_map),
         "reference": reference,
         "data": {"clips": clips, "license": "; ".join(licenses)},
+        "task": None if env_cfg is None else {"env": dataclasses.asdict(env_cfg)},
     }
 
 

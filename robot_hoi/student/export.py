@@ -77,7 +77,7 @@ def run_student_export(args: argparse.Namespace, ckpt: Path) -> int:
         keyframes=env_cfg.student_keyframes, action_clip=env_cfg.action_clip,
         clips=[clip_identity(clips[index], sources[index])],
         reference={"file": motion_file.name, "sha256": file_sha256(motion_file)},
-        **offset_settings(env_cfg),
+        **offset_settings(env_cfg), env_cfg=env_cfg,
     )
     report = export_policy(model.exported_policy(), model.num_actor_obs, metadata, out, recorded_obs=recorded)
     for line in report.lines():

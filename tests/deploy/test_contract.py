@@ -244,3 +244,18 @@ def test_which_inputs_a_policy_needs():
     ref_only = make_contract(emb, obs_terms=["joint_pos", "ref_object_pos"])
     assert ref_only.uses_reference and not ref_only.uses_object  # the reference object comes from the motion
     assert make_contract(emb, obs_terms=["object_rot"]).uses_object
+
+
+@pytest.mark.parametrize("task", [[1], {"env": 3}, {"world": {}}])
+def test_malformed_task_record_is_refused(contract, tmp_path, task):
+    meta = dict(contract.to_metadata(), task=json.dumps(task))
+    path = write_policy(tmp_path / "bad.onnx", meta, contract.obs_dim, contract.num_actions)
+    with pytest.raises(ContractError, match=r"metadata 'task' must be null or \{'env'"):
+        PolicyContract.from_onnx(path)
+
+
+def test_task_record_round_trips(contract, tmp_path):
+    task = {"env": {"object_friction": 0.5, "terminations": {"max_contact_loss_frames": 10}}}
+    meta = dict(contract.to_metadata(), task=json.dumps(task))
+    back = PolicyContract.from_onnx(write_policy(tmp_path / "p.onnx", meta, contract.obs_dim, contract.num_actions))
+    assert back.task == task and back.to_metadata() == meta
