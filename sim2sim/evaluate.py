@@ -112,7 +112,6 @@ def evaluate(o: Sim2SimOptions) -> tuple[dict, dict[str, Path]]:
     from sim2sim import plots as plotting
     from sim2sim.episode import EpisodeJob
     from sim2sim.hands import DIRECT_TRANSPORTS
-    from sim2sim.monitor import Thresholds
     from sim2sim.perturbations import resolve_suite
     from sim2sim.physics import PhysicsSettings, differences, training_physics
     from sim2sim.report import load_previous, write_report
@@ -150,7 +149,7 @@ def evaluate(o: Sim2SimOptions) -> tuple[dict, dict[str, Path]]:
     jobs = []
     for entry in entries:
         task = task_config(entry.contract)  # each policy's episodes end and succeed by the rules it learnt with
-        thresholds = Thresholds(**{k: getattr(task.terminations, k) for k in Thresholds.__dataclass_fields__})
+        thresholds = task.terminations  # the env config's terminations are a Thresholds
         success_bounds = (task.success_max_object_error, task.success_max_link_error)
         for target in entry.targets:
             max_frames = None if o.seconds is None else max(1, int(round(o.seconds * target.motion.fps)))
