@@ -6,8 +6,8 @@ It is the project's embodiment (robot_hoi.embodiment.build_robot_spec) with thre
     - robot self-collision is on by default (the real robot has no collision filter; training turns it off),
     - a gantry: a weld from the world to the pelvis that holds the robot while the runtime goes through
       ZERO_TORQUE and RAMP_TO_DEFAULT, released when the runtime reaches HOLD (as an operator lowers the robot).
-The object is added exactly as training adds it (robot_hoi.sim.scene.add_object), with the same contact
-sensors (add_sensors), on the same floor.
+The object and the contact sensors are added by the function training uses (robot_hoi.sim.scene.add_task_object),
+on the same floor.
 
 Workers load the bytes with `load_model` and never import robot_hoi.sim (which pulls in torch).
 """
@@ -26,8 +26,7 @@ def build_scene_bytes(embodiment: str, object_asset, *, self_collision: bool = T
     import mujoco
 
     from robot_hoi.embodiment import build_robot_spec, load_embodiment
-    from robot_hoi.embodiment.collision import world_bits
-    from robot_hoi.sim.scene import add_object, add_sensors
+    from robot_hoi.sim.scene import add_task_object
 
     cfg = load_embodiment(embodiment)
     spec = build_robot_spec(cfg, self_collision=self_collision, floor=True)
@@ -44,12 +43,8 @@ def build_scene_bytes(embodiment: str, object_asset, *, self_collision: bool = T
         actuator.ctrlrange = [-effort, effort]
         actuator.forcelimited = mujoco.mjtLimited.mjLIMITED_TRUE
         actuator.forcerange = [-effort, effort]
-    contype, conaffinity = world_bits()
-    add_object(spec, np.asarray(object_asset.vertices), np.asarray(object_asset.faces), density=density,
-               friction=friction, contype=contype, conaffinity=conaffinity,
-               mass=getattr(object_asset, "mass_kg", None), torsional_friction=torsional_friction,
-               pieces=object_asset.collision_pieces(object_collision))
-    add_sensors(spec, dict(cfg.link_map))
+    add_task_object(spec, cfg, object_asset, density=density, friction=friction,
+                    torsional_friction=torsional_friction, object_collision=object_collision)
     spec.add_equality(name=GANTRY, type=mujoco.mjtEq.mjEQ_WELD, objtype=mujoco.mjtObj.mjOBJ_BODY,
                       name1="world", name2=PELVIS, data=[0.0] * 3 + [0.0, 0.0, cfg.spawn_height, 1.0, 0.0, 0.0, 0.0]
                       + [1.0] + [0.0])

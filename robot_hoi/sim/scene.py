@@ -89,6 +89,21 @@ def add_object(spec: mujoco.MjSpec, vertices: np.ndarray, faces: np.ndarray, *, 
                       contype=contype, conaffinity=conaffinity, rgba=[0.8, 0.55, 0.3, 1.0])
 
 
+def add_task_object(spec: mujoco.MjSpec, embodiment, object_asset, *, density: float, friction: float,
+                    torsional_friction: float, object_collision: str) -> list[str]:
+    """The interaction task's object (`add_object` on the world's collision bits, the asset's known mass winning
+    over `density`) and the sensors (`add_sensors`): what training and sim2sim add alike to a robot spec. Returns
+    the contact sensor names."""
+    from robot_hoi.embodiment.collision import world_bits
+
+    contype, conaffinity = world_bits()
+    add_object(spec, np.asarray(object_asset.vertices), np.asarray(object_asset.faces), density=density,
+               friction=friction, contype=contype, conaffinity=conaffinity,
+               mass=getattr(object_asset, "mass_kg", None), torsional_friction=torsional_friction,
+               pieces=object_asset.collision_pieces(object_collision))
+    return add_sensors(spec, dict(embodiment.link_map))
+
+
 def add_sensors(spec: mujoco.MjSpec, link_map: dict[str, str]) -> list[str]:
     """Link pose/velocity blocks and contact sensors; returns the contact sensor names in order."""
     body_names = {b.name for b in spec.bodies}

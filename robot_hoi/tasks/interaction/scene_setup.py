@@ -6,9 +6,8 @@ import mujoco
 import numpy as np
 import torch
 
-from robot_hoi.embodiment.collision import world_bits
 from robot_hoi.sim import make_backend
-from robot_hoi.sim.scene import OBJECT_BODY, OBJECT_JOINT, SceneLayout, add_object, add_sensors
+from robot_hoi.sim.scene import OBJECT_BODY, OBJECT_JOINT, SceneLayout, add_task_object
 from robot_hoi.termination import hand_link_groups
 
 HAND_LINK_MARKERS = ("_tip", "hand_base")
@@ -23,12 +22,8 @@ class InteractionScene:
         self.embodiment = embodiment
         self.object_asset = object_asset
         spec = build_robot_spec(embodiment, self_collision=self_collision, floor=True)
-        contype, conaffinity = world_bits()
-        add_object(spec, np.asarray(object_asset.vertices), np.asarray(object_asset.faces), density=density,
-                   friction=friction, contype=contype, conaffinity=conaffinity,
-                   mass=getattr(object_asset, "mass_kg", None), torsional_friction=torsional_friction,
-                   pieces=object_asset.collision_pieces(object_collision))
-        contact_names = add_sensors(spec, dict(embodiment.link_map))
+        contact_names = add_task_object(spec, embodiment, object_asset, density=density, friction=friction,
+                                        torsional_friction=torsional_friction, object_collision=object_collision)
         if timestep is not None:
             spec.option.timestep = timestep
         self.spec = spec
