@@ -11,7 +11,7 @@ import sys
 
 from robot_hoi.data.cli_options import add_clip_options
 
-KINDS = ("lift_carry", "push", "lift_place", "walk", "carry", "squat", "turn")  # robot_hoi.data.synth.KINDS (not imported: keeps --help light)
+KINDS = ("lift_carry", "push", "lift_place", "walk", "carry", "squat", "turn", "walk_back")  # robot_hoi.data.synth.KINDS (not imported: keeps --help light)
 ARTIFACTS = ("noise", "floating_contact", "penetration", "missing_frames", "dropped_frames")
 
 

@@ -6,7 +6,8 @@ completes on a CPU budget, since it needs balance but no walking).
 The base-motion kinds, for a policy that already walks before it learns a clip's interaction: `walk` (stand, walk
 1-2.5 m at a seeded pace, stop; the box lies 1 m beside the path, untouched), `turn` (the same walk bending into a
 45 or 90 degree arc, left or right), `carry` (the box at the feet: squat, lift, carry it 1-2 m, put it down:
-lift_carry without the walk-up) and `squat` (squat down and up twice, hands free). Seeds vary the distance, heading and start, and
+lift_carry without the walk-up), `squat` (squat down and up twice, hands free) and `walk_back` (stand, step
+0.5-1.25 m straight backwards, facing ahead, stop; hands free). Seeds vary the distance, heading and start, and
 seeds 0-3 (mod 4) set four paces from 0.8 to 0.4 m/s (squats: depth and tempo); `BASE_MOTIONS` lists the library
 (`embedded:base` as a training source).
 
@@ -43,11 +44,13 @@ from robot_hoi.data.template_skeleton import (
 )
 from robot_hoi.errors import UserError
 
-KINDS = ("lift_carry", "push", "lift_place", "walk", "carry", "squat", "turn")
+KINDS = ("lift_carry", "push", "lift_place", "walk", "carry", "squat", "turn", "walk_back")
 # The base-motion library: one object (the 5 kg box), straight walks at four paces, four turning walks (left and
-# right, 45 and 90 degrees), three carries, two squat sets.
+# right, 45 and 90 degrees), three carries, two squat sets, four backward walks (OMOMO's table drags walk backwards
+# 1.1 m pulling the table; a base that only walks forwards leaves that step to every per-clip teacher).
 BASE_MOTIONS = (("walk", 0), ("walk", 1), ("walk", 2), ("walk", 3), ("turn", 0), ("turn", 1), ("turn", 2), ("turn", 3),
-                ("carry", 0), ("carry", 1), ("carry", 2), ("squat", 0), ("squat", 1))
+                ("carry", 0), ("carry", 1), ("carry", 2), ("squat", 0), ("squat", 1),
+                ("walk_back", 0), ("walk_back", 1), ("walk_back", 2), ("walk_back", 3))
 ARTIFACTS = ("noise", "floating_contact", "penetration", "missing_frames", "dropped_frames")
 FPS = 30.0
 BOX_SIZE_M = (0.4, 0.4, 0.3)
@@ -93,6 +96,8 @@ NOISE_POS_M = 0.01
 NOISE_ROT_RAD = 0.02
 BOX_ASIDE_M = 1.0  # walk / squat: the box lies this far left of the path
 PACE_RANGE = (1.0, 1.6)  # x STEP's step time, / its step length: 0.8 .. 0.4 m/s
+BACK_STEP_SHARE = 0.6  # backward steps: this share of a forward step's length (people step back shorter)
+BACK_TRAVEL_SHARE = 0.5  # backward walks cover this share of a forward walk's distance (0.5 .. 1.25 m)
 
 
 @dataclass(frozen=True)
@@ -112,8 +117,8 @@ class Scene:
         travel = {"lift_carry": rng.uniform(1.9, 2.1), "push": rng.uniform(1.1, 1.3)}.get(kind, 0.0)
         scene = cls(float(rng.uniform(1.45, 1.6)), float(travel), float(rng.uniform(-0.5, 0.5)),
                     (float(rng.uniform(-0.3, 0.3)), float(rng.uniform(-0.3, 0.3))))  # fmt: skip
-        if kind in ("walk", "carry", "squat", "turn"):  # drawn after the others: the original kinds keep their scenes
-            travel = {"walk": rng.uniform(1.0, 2.5), "carry": rng.uniform(1.0, 2.0),
+        if kind in ("walk", "carry", "squat", "turn", "walk_back"):  # drawn after the others: older kinds keep theirs
+            travel = {"walk": rng.uniform(1.0, 2.5), "walk_back": BACK_TRAVEL_SHARE * rng.uniform(1.0, 2.5), "carry": rng.uniform(1.0, 2.0),
                       "turn": rng.uniform(1.5, 2.5)}.get(kind, 0.0)
             pace = PACE_RANGE[0] + (seed % 4) / 3 * (PACE_RANGE[1] - PACE_RANGE[0])  # seeds 0-3: four paces
             scene = replace(scene, travel=float(travel), pace=float(pace),
@@ -228,6 +233,19 @@ def _walk_script(scene: Scene, gap_hold: float) -> Script:
     pelvis_z = ramps(t, STAND_PELVIS_Z, [(0.1, 0.5, WALK_PELVIS_Z), (walk.t_end, walk.t_end + 0.5, STAND_PELVIS_Z)])
     pelvis_x = keyframes(t, walk.pelvis_keys())
     return _hands_free(t, [walk], pelvis_x, pelvis_z, np.full_like(t, 0.05), np.zeros_like(t), scene)
+
+
+def _walk_back_script(scene: Scene, gap_hold: float) -> Script:
+    """Stand, walk `travel` straight backwards facing ahead (shorter steps), stop and stand; hands free, the box
+    beside the path."""
+    step = dict(scene.step, max_step=BACK_STEP_SHARE * scene.step["max_step"])
+    walk = plan_walk(0.3, 0.0, -scene.travel, **step)
+    t_end = walk.t_end + 0.8
+    t = np.arange(int(round(t_end * FPS))) / FPS
+    pelvis_z = ramps(t, STAND_PELVIS_Z, [(0.1, 0.5, WALK_PELVIS_Z), (walk.t_end, walk.t_end + 0.5, STAND_PELVIS_Z)])
+    pelvis_x = keyframes(t, walk.pelvis_keys())
+    return _hands_free(t, [walk], pelvis_x, pelvis_z, np.full_like(t, 0.05), np.zeros_like(t),
+                       replace(scene, travel=-scene.travel))
 
 
 def _turn_script(scene: Scene, gap_hold: float) -> Script:
@@ -379,7 +397,8 @@ def _walk_lift_carry_script(scene: Scene, gap_hold: float) -> Script:
                   **hold, **TALL_BOX_GRIP)
 
 SCRIPTS = {"lift_carry": _walk_lift_carry_script, "push": _push_script, "lift_place": _lift_place_script,
-           "walk": _walk_script, "carry": _floor_carry_script, "squat": _squat_script, "turn": _turn_script}
+           "walk": _walk_script, "carry": _floor_carry_script, "squat": _squat_script, "turn": _turn_script,
+           "walk_back": _walk_back_script}
 
 
 def _box_hand_targets(script: Script, side: str):

@@ -132,7 +132,7 @@ def test_bad_requests_are_user_errors():
         default_clip("push", artifacts=["floating_contact", "penetration"])
 
 
-def test_base_motion_library_walks_carries_and_squats():
+def test_base_motion_library_walks_carries_squats_and_steps_back():
     from robot_hoi.data.synth import BASE_MOTIONS, embedded_clip
     from robot_hoi.tasks.interaction.factory import expand_sources
 
@@ -159,6 +159,11 @@ def test_base_motion_library_walks_carries_and_squats():
         elif kind == "carry":
             assert clip.contact.any() and travel > 0.9
             assert np.ptp(clip.root_pos[: int(0.5 * clip.fps), 0]) < 0.02  # no walk-up: the box is at the feet
+        elif kind == "walk_back":  # steps backwards, still facing the way it started
+            facing = Rotation.from_quat(clip.root_quat_xyzw).apply([1.0, 0.0, 0.0])[:, :2]
+            moved = clip.root_pos[-1, :2] - clip.root_pos[0, :2]
+            assert not clip.contact.any() and travel > 0.45
+            assert moved @ facing[0] < -0.95 * travel and (facing @ facing[0]).min() > 0.95
         else:
             assert not clip.contact.any() and travel < 0.02 and clip.root_pos[:, 2].min() < 0.6
     assert max(speeds) > 1.5 * min(speeds)  # the walks cover several paces
