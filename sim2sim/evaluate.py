@@ -50,6 +50,7 @@ class PolicyEntry:
     path: str
     contract: object
     targets: list = field(default_factory=list)
+    task: object = None  # the task config it was trained with (sim2sim.targets.task_config), read once
 
 
 def _sha256(path: str) -> str:
@@ -143,12 +144,15 @@ def evaluate(o: Sim2SimOptions) -> tuple[dict, dict[str, Path]]:
     say = (lambda *a: None) if o.quiet else (lambda *a: print(*a, file=sys.stderr, flush=True))
     for entry in entries:
         say(f"sim2sim: preparing {entry.label} ({entry.path})")
-        entry.targets = (clip_targets(entry.contract, o.clips, o.embodiment, o.self_collision, o.clip_options)
+        entry.task = task_config(entry.contract)  # each policy's episodes end and succeed by the rules it learnt with
+        entry.targets = (clip_targets(entry.contract, o.clips, o.embodiment, o.self_collision, o.clip_options,
+                                      entry.task)
                          if o.clips else
-                         policy_targets(entry.contract, o.motion, o.embodiment, o.self_collision, o.clip_options))
+                         policy_targets(entry.contract, o.motion, o.embodiment, o.self_collision, o.clip_options,
+                                        entry.task))
     jobs = []
     for entry in entries:
-        task = task_config(entry.contract)  # each policy's episodes end and succeed by the rules it learnt with
+        task = entry.task
         thresholds = task.terminations  # the env config's terminations are a Thresholds
         success_bounds = (task.success_max_object_error, task.success_max_link_error)
         for target in entry.targets:

@@ -77,8 +77,9 @@ def _target(clip, source: str, motion: ReferenceMotion, embodiment: str, self_co
 
 
 def policy_targets(contract, motion_path: str | None, embodiment: str, self_collision: bool,
-                   clip_options: dict | None = None) -> list[EvalTarget]:
-    """The policy's own reference (its sidecar, or --motion) on the object of the clip it was exported with."""
+                   clip_options: dict | None = None, env_cfg=None) -> list[EvalTarget]:
+    """The policy's own reference (its sidecar, or --motion) on the object of the clip it was exported with.
+    `env_cfg`: the policy's task config when the caller has it (else read with task_config)."""
     from deploy.errors import DeployError
     from deploy.motion import load_motion
     from robot_hoi.errors import UserError
@@ -104,12 +105,13 @@ def policy_targets(contract, motion_path: str | None, embodiment: str, self_coll
     if not source.startswith("embedded:") and not Path(source).is_file():
         raise UserError(f"{contract.source}: its clip {source} is not on this machine; pass --clips CLIP")
     return [_target(load_source(source, clip_options), source, motion, embodiment, self_collision,
-                    task_config(contract))]
+                    env_cfg or task_config(contract))]
 
 
 def clip_targets(contract, sources: list[str], embodiment: str, self_collision: bool,
-                 clip_options: dict | None = None) -> list[EvalTarget]:
-    """Retarget each clip as training does and evaluate the policy on it (its reference replaces the sidecar)."""
+                 clip_options: dict | None = None, env_cfg=None) -> list[EvalTarget]:
+    """Retarget each clip as training does and evaluate the policy on it (its reference replaces the sidecar).
+    `env_cfg`: the policy's task config when the caller has it (else read with task_config)."""
     from deploy.errors import DeployError
     from robot_hoi.embodiment import load_embodiment
     from robot_hoi.errors import UserError
@@ -122,7 +124,7 @@ def clip_targets(contract, sources: list[str], embodiment: str, self_collision: 
     )
     from robot_hoi.tasks.interaction.reference import build_reference
 
-    env_cfg = task_config(contract)
+    env_cfg = env_cfg or task_config(contract)
     cfg = load_embodiment(embodiment)
     targets = []
     for source in expand_sources(sources):
