@@ -225,9 +225,10 @@ def _floor_carry_script(scene: Scene, gap_hold: float) -> Script:
     return Script(t, walk_up + [walk2], pelvis_x, pelvis_z, lean, squat, box_pos, grip, gap, "sides")
 
 
-def _walk_script(scene: Scene, gap_hold: float) -> Script:
-    """Stand, walk `travel` straight ahead, stop and stand; the box lies beside the path (no contact)."""
-    walk = plan_walk(0.3, 0.0, scene.travel, **scene.step)
+def _straight_walk(scene: Scene, step: dict[str, float]) -> Script:
+    """Stand, walk `scene.travel` along x (< 0: backwards, facing ahead), stop and stand; hands free, the box
+    beside the path (no contact)."""
+    walk = plan_walk(0.3, 0.0, scene.travel, **step)
     t_end = walk.t_end + 0.8
     t = np.arange(int(round(t_end * FPS))) / FPS
     pelvis_z = ramps(t, STAND_PELVIS_Z, [(0.1, 0.5, WALK_PELVIS_Z), (walk.t_end, walk.t_end + 0.5, STAND_PELVIS_Z)])
@@ -235,17 +236,15 @@ def _walk_script(scene: Scene, gap_hold: float) -> Script:
     return _hands_free(t, [walk], pelvis_x, pelvis_z, np.full_like(t, 0.05), np.zeros_like(t), scene)
 
 
+def _walk_script(scene: Scene, gap_hold: float) -> Script:
+    """Stand, walk `travel` straight ahead, stop and stand."""
+    return _straight_walk(scene, scene.step)
+
+
 def _walk_back_script(scene: Scene, gap_hold: float) -> Script:
-    """Stand, walk `travel` straight backwards facing ahead (shorter steps), stop and stand; hands free, the box
-    beside the path."""
+    """Stand, step `travel` straight backwards facing ahead (shorter steps), stop and stand."""
     step = dict(scene.step, max_step=BACK_STEP_SHARE * scene.step["max_step"])
-    walk = plan_walk(0.3, 0.0, -scene.travel, **step)
-    t_end = walk.t_end + 0.8
-    t = np.arange(int(round(t_end * FPS))) / FPS
-    pelvis_z = ramps(t, STAND_PELVIS_Z, [(0.1, 0.5, WALK_PELVIS_Z), (walk.t_end, walk.t_end + 0.5, STAND_PELVIS_Z)])
-    pelvis_x = keyframes(t, walk.pelvis_keys())
-    return _hands_free(t, [walk], pelvis_x, pelvis_z, np.full_like(t, 0.05), np.zeros_like(t),
-                       replace(scene, travel=-scene.travel))
+    return _straight_walk(replace(scene, travel=-scene.travel), step)
 
 
 def _turn_script(scene: Scene, gap_hold: float) -> Script:
