@@ -118,8 +118,9 @@ class Scene:
         scene = cls(float(rng.uniform(1.45, 1.6)), float(travel), float(rng.uniform(-0.5, 0.5)),
                     (float(rng.uniform(-0.3, 0.3)), float(rng.uniform(-0.3, 0.3))))  # fmt: skip
         if kind in ("walk", "carry", "squat", "turn", "walk_back"):  # drawn after the others: older kinds keep theirs
-            travel = {"walk": rng.uniform(1.0, 2.5), "walk_back": BACK_TRAVEL_SHARE * rng.uniform(1.0, 2.5), "carry": rng.uniform(1.0, 2.0),
-                      "turn": rng.uniform(1.5, 2.5)}.get(kind, 0.0)
+            # every value is drawn whatever the kind: a new kind's draw goes last so the older kinds keep theirs
+            travel = {"walk": rng.uniform(1.0, 2.5), "carry": rng.uniform(1.0, 2.0), "turn": rng.uniform(1.5, 2.5),
+                      "walk_back": BACK_TRAVEL_SHARE * rng.uniform(1.0, 2.5)}.get(kind, 0.0)
             pace = PACE_RANGE[0] + (seed % 4) / 3 * (PACE_RANGE[1] - PACE_RANGE[0])  # seeds 0-3: four paces
             scene = replace(scene, travel=float(travel), pace=float(pace),
                             box_distance=GRASP_DISTANCE if kind == "carry" else scene.box_distance,
