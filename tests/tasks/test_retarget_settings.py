@@ -1,5 +1,6 @@
 """The task config's retarget settings (leg-load and dynamics compensation, finger closure) reach the reference the
-env tracks, and a cached reference made with other settings is refused instead of silently reused."""
+env tracks, and a cached reference made with other settings, or from another version of the clip, is refused instead
+of silently reused."""
 
 from dataclasses import replace
 
@@ -85,3 +86,19 @@ def test_object_collision_reaches_the_scene_and_guards_the_cache(tmp_path, table
         factory.make_env([clip], InteractionEnvCfg(num_envs=2, backend="cpu"), embodiment, cache=tmp_path)
     with pytest.raises(ValueError, match="object_collision must be one of hull, decomposed, not 'mesh'"):
         InteractionEnvCfg(object_collision="mesh")
+
+
+def test_a_cached_reference_of_another_version_of_the_clip_is_refused(tmp_path):
+    """The cache is keyed by clip name: a clip regenerated under the same name (e.g. a synthetic clip whose seed draws
+    changed) used to be tracked against the old reference and crash indexing past its end."""
+    embodiment = load_embodiment("g1_inspire")
+    clip = factory.load_source("embedded:lift_place")
+    factory.load_or_retarget(clip, embodiment, tmp_path)
+    cached = tmp_path / f"{clip.name}.npz"
+    assert factory.load_or_retarget(clip, embodiment, tmp_path).num_frames == clip.num_frames  # same clip: reused
+    moved = clip.copy()
+    moved.object_pos = moved.object_pos + np.array([0.0, 0.0, 0.01])
+    with pytest.raises(UserError, match=rf"{cached.name}.*another version of clip {clip.name}"):
+        factory.load_or_retarget(moved, embodiment, tmp_path)
+    with pytest.raises(UserError, match=r"another version.*frames, the clip has"):
+        factory.load_or_retarget(clip.select_frames(slice(0, clip.num_frames - 5)), embodiment, tmp_path)

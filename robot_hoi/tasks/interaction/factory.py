@@ -120,8 +120,14 @@ def load_or_retarget(clip, embodiment, cache: Path | None, options=None):
 
     options = options if options is not None else retarget_options()
     path = cache / f"{_safe(clip.name)}.npz" if cache is not None else None
+    clip_key = fingerprint(clip)
     if path is not None and path.exists():
         motion = RobotMotion.load(path)
+        made_from = motion.meta.get("clip_fingerprint")  # older files: only the frame count can be checked
+        if motion.num_frames != clip.num_frames or made_from not in (None, clip_key):
+            raise UserError(f"{path}: this reference was retargeted from another version of clip {clip.name} "
+                            f"({motion.num_frames} frames, the clip has {clip.num_frames}); delete the file to "
+                            "retarget, or use the clip it was made from")
         defaults = retarget_options()
         for field, (group, name), label in _RETARGET_SETTINGS:
             default = getattr(getattr(defaults, group), name)
@@ -142,6 +148,7 @@ def load_or_retarget(clip, embodiment, cache: Path | None, options=None):
         _RETARGETS[key] = copy.deepcopy(motion)
         while len(_RETARGETS) > _RETARGETS_KEPT:
             _RETARGETS.popitem(last=False)
+    motion.meta["clip_fingerprint"] = clip_key
     if path is not None:
         motion.save(path)
     return motion
