@@ -39,6 +39,10 @@ def register(subparsers) -> None:
     p.add_argument("--finger-closure", type=float,
                    help="fraction of the fingers' stroke closed while a hand holds (default 0.6; 0: flat hands that "
                         "still squeeze); training: --set env.retarget_finger_closure=F")
+    p.add_argument("--squeeze-toward", choices=("other_hand", "surface"), default=None,
+                   help="where a holding hand's PD targets squeeze: toward the other hand (default; a two-hand grip) "
+                        "or into the object's nearest face (a push); training: "
+                        "--set env.retarget_squeeze_toward=surface")
     add_clip_options(p, "--objects-dir")  # --objects-dir: the old spelling, kept working
     p.add_argument("--object-collision", choices=("hull", "decomposed"), default=None,
                    help="what the object collides as: its convex hull or its convex pieces (CoACD; a hand reaches "
@@ -83,6 +87,8 @@ def run(args: argparse.Namespace) -> int:
                                                object_collision=task.object_collision),
                       executable=replace(options.executable, compensate_leg_loads=args.leg_loads,
                                          compensate_dynamics=args.dynamics))
+    if args.squeeze_toward is not None:
+        options = replace(options, executable=replace(options.executable, squeeze_toward=args.squeeze_toward))
     if args.finger_closure is not None:
         closure = check_closure(args.finger_closure, "--finger-closure")
         options = replace(options, grasp=replace(options.grasp, closure=closure))

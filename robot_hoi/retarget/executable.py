@@ -6,7 +6,7 @@
   with a Gaussian of `smoothing_sigma_s`.
 - Squeeze. Position targets that put the hands exactly on the object hold nothing: the PD servos produce force
   only from an error. While a hand holds the object, its arm's PD targets are moved so the hand would go
-  `squeeze_depth` further toward the other hand (damped least squares on the wrist Jacobian of the shoulder and
+  `squeeze_depth` further toward the other hand, or into the object's nearest face (`squeeze_toward`) (damped least squares on the wrist Jacobian of the shoulder and
   elbow joints). Only the PD targets (`joint_pos`) carry the squeeze; the reference states and link targets do
   not, so the rewards still ask for the hands on the surface.
 - Load compensation. A PD servo settles where its error balances the load: with the G1's arm gains the bent-over
@@ -31,7 +31,12 @@ from robot_hoi.retarget.kinematics import joint_ids
 class ExecutableSettings:
     max_joint_speed: float = 12.0     # rad/s for the waist and arm joints (legs stay as solved)
     smoothing_sigma_s: float = 0.03   # s, Gaussian low-pass of those tracks (0: off)
-    squeeze_depth: float = 0.06       # m the held hands' PD targets go past the surface, toward each other
+    squeeze_depth: float = 0.06       # m the held hands' PD targets go past the surface (see squeeze_toward)
+    # "other_hand": toward the other wrist (a two-hand grip of a box's sides). "surface": into the object along the
+    # inward normal of the face nearest the hand, so a push presses into the box (one hand too). A zero-residual
+    # replay of sub8_largebox_000 (a two-hand push) from frame 30: "other_hand" left the box behind the reference
+    # by 19 cm in 0.8 s with no hand touching it
+    squeeze_toward: str = "other_hand"
     squeeze_damping: float = 1e-3     # damped least squares (m^2)
     compensate_loads: bool = True     # PD targets offset by the static gravity / held-object torque over kp
     # ... for the legs too: the torques that carry the body on the feet in contact with the floor. A crouched G1
@@ -69,11 +74,24 @@ def smooth_joints(qpos: np.ndarray, qadr: np.ndarray, fps: float, settings: Exec
     return out
 
 
+SQUEEZE_TOWARD = ("other_hand", "surface")
+
+
+def check_squeeze_toward(value: str, name: str) -> str:
+    """A user-given squeeze direction (`name`: the flag or config key it came from)."""
+    from robot_hoi.errors import UserError
+
+    if value not in SQUEEZE_TOWARD:
+        raise UserError(f"{name} must be one of {', '.join(SQUEEZE_TOWARD)}, got {value!r}")
+    return value
+
+
 def squeeze_offsets(model: mujoco.MjModel, qpos: np.ndarray, closure: dict[str, np.ndarray],
                     wrist_bodies: dict[str, str], arm_joints: dict[str, list[str]],
-                    settings: ExecutableSettings) -> np.ndarray:
+                    settings: ExecutableSettings, directions: dict[str, np.ndarray] | None = None) -> np.ndarray:
     """(T, nq) joint offsets for the PD targets: per side, scaled by that hand's closure (0..1, ramps in and out),
-    the joint motion that moves its wrist `squeeze_depth` toward the other wrist."""
+    the joint motion that moves its wrist `squeeze_depth` along `directions[side]` ((T, 3) world unit vectors),
+    or toward the other wrist where none are given."""
     data = mujoco.MjData(model)
     offsets = np.zeros_like(qpos)
     jac = np.zeros((3, model.nv))
@@ -83,11 +101,15 @@ def squeeze_offsets(model: mujoco.MjModel, qpos: np.ndarray, closure: dict[str, 
         data.qpos[:] = qpos[t]
         mujoco.mj_kinematics(model, data)
         mujoco.mj_comPos(model, data)
-        for side, other in (("left", "right"), ("right", "left")):
+        for side in closure:
             if closure[side][t] <= 0:
                 continue
-            towards = data.xpos[bodies[other]] - data.xpos[bodies[side]]
-            towards /= max(np.linalg.norm(towards), 1e-6)
+            if directions is not None:
+                towards = directions[side][t]
+            else:
+                other = next(o for o in bodies if o != side)
+                towards = data.xpos[bodies[other]] - data.xpos[bodies[side]]
+                towards /= max(np.linalg.norm(towards), 1e-6)
             mujoco.mj_jacBody(model, data, jac, None, bodies[side])
             cols = model.jnt_dofadr[joints[side]]
             j = jac[:, cols]

@@ -75,7 +75,8 @@ class ProbePoints:
         return len(self.body_ids)
 
 
-def _subtree(model, root: int) -> list[int]:
+def subtree(model, root: int) -> list[int]:
+    """Body `root` and every body below it."""
     out = []
     for b in range(model.nbody):
         a = b
@@ -95,8 +96,8 @@ def hand_probe_points(model, root_bodies, arm_roots=()) -> ProbePoints:
     """
     import mujoco
 
-    hand_bodies = [b for root in root_bodies for b in _subtree(model, int(root))]
-    arm_bodies = [b for root in arm_roots for b in _subtree(model, int(root)) if b not in hand_bodies]
+    hand_bodies = [b for root in root_bodies for b in subtree(model, int(root))]
+    arm_bodies = [b for root in arm_roots for b in subtree(model, int(root)) if b not in hand_bodies]
     bodies, local, radius = [], [], []
     for body in hand_bodies + arm_bodies:
         for g in np.flatnonzero(model.geom_bodyid == body):

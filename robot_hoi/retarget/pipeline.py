@@ -27,7 +27,7 @@ from robot_hoi.retarget.kinematics import (
 )
 from robot_hoi.retarget.landmarks import landmarks_for
 from robot_hoi.retarget.motion import RobotMotion, finite_difference_qvel
-from robot_hoi.retarget.object_contact import hand_probe_points
+from robot_hoi.retarget.object_contact import hand_probe_points, subtree
 from robot_hoi.retarget.targets import RobotTargets, TargetMapping, hand_side, link_group, targets_from_clip
 
 
@@ -130,7 +130,7 @@ def retarget_targets(
     limited = result.qpos.copy()  # the push-out may step fast again: the speed limit has the last word
     limited[:, upper_qadr] = limit_speed(limited[:, upper_qadr], options.executable.max_joint_speed / targets.fps)
     result = solver.evaluate(limited, targets.pos, result.iterations, track)
-    squeeze = _squeeze(model, cfg, result.qpos, hold, targets.fps, options)
+    squeeze = _squeeze(model, cfg, result.qpos, hold, targets.fps, options, solver, track)
     legs = options.executable.compensate_leg_loads
     soles = (solver.sole_body, solver.sole_local) if legs and len(solver.sole_body) else None
     loads = _load_compensation(model, result.qpos, body_joints if legs else upper, hold, targets, options, soles)
@@ -190,18 +190,37 @@ def _depenetrate(solver: IKSolver, result: IKResult, targets: RobotTargets, trac
 
 
 def _squeeze(model: mujoco.MjModel, cfg, qpos: np.ndarray, hold: dict[str, np.ndarray], fps: float,
-             options: RetargetOptions) -> np.ndarray:
+             options: RetargetOptions, solver: IKSolver | None = None, track=None) -> np.ndarray:
     """(T, nq) grasp-squeeze offsets for the PD targets (executable.py), ramped like the finger closure (at the
-    same rate; flat fingers, closure 0, still squeeze)."""
+    same rate; flat fingers, closure 0, still squeeze). Into the surface needs `solver` (its hand probes) and the
+    object `track`."""
+    settings = options.executable
+    into_surface = settings.squeeze_toward == "surface"
     sides = ("left", "right")
-    if options.executable.squeeze_depth <= 0 or set(hold) != set(sides):
+    if settings.squeeze_depth <= 0 or set(hold) != set(sides) or (into_surface and (solver is None or track is None)):
         return np.zeros_like(qpos)
     full_stroke = replace(options.grasp, closure=1.0)
     ramp = {side: closure_profile(hold[side], fps, full_stroke) for side in sides}
     wrists = {side: f"{side}_wrist_yaw_link" for side in sides}
     arms = {side: [f"{side}_shoulder_pitch_joint", f"{side}_shoulder_roll_joint", f"{side}_shoulder_yaw_joint",
                    f"{side}_elbow_joint"] for side in sides}
-    return squeeze_offsets(model, qpos, ramp, wrists, arms, options.executable)
+    directions = _into_surface(solver, qpos, track, wrists, ramp) if into_surface else None
+    return squeeze_offsets(model, qpos, ramp, wrists, arms, settings, directions)
+
+
+def _into_surface(solver: IKSolver, qpos: np.ndarray, track, wrists: dict[str, str],
+                  ramp: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """{side: (T, 3)} the inward normal of the object face nearest each hand's collision spheres, where it holds."""
+    model = solver.model
+    sides = list(wrists)
+    probe_sets = [np.flatnonzero(solver.probes.hand & np.isin(solver.probes.body_ids, subtree(
+        model, mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, wrists[side])))) for side in sides]
+    frames = np.flatnonzero(sum(ramp.values()) > 0)
+    _, normals = solver.hand_gaps(qpos, frames, track, probe_sets)
+    out = {side: np.zeros((len(qpos), 3)) for side in sides}
+    for k, side in enumerate(sides):
+        out[side][frames] = -normals[:, k]
+    return out
 
 
 def _load_compensation(model: mujoco.MjModel, qpos: np.ndarray, joints: list[str], hold: dict[str, np.ndarray],

@@ -265,3 +265,59 @@ def test_hold_test_starts_just_before_the_grip_not_at_the_walk_up(monkeypatch):
     assert result["completed"] or result["ended_by"] in ("object_deviation", "contact_lost", "link_deviation",
                                                          "interaction_distance", "root_too_low")
     assert len(envs) == 1 and bool(envs[0].assisted.all())
+
+
+def _squeeze_depth_gain(result, model) -> float:
+    """Mean over the squeezed frames of how much deeper the hands' collision spheres reach into the object at the
+    PD-target pose than at the reference pose (m)."""
+    import mujoco
+
+    from robot_hoi.retarget.object_contact import hand_probe_points
+
+    motion, hull = result.motion, result.targets.object_hull
+    wrists = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, f"{s}_wrist_yaw_link") for s in ("left", "right")]
+    probes = hand_probe_points(model, wrists)
+    act_qadr = model.jnt_qposadr[model.actuator_trnid[:, 0]]
+    squeezed = np.flatnonzero(np.abs(motion.joint_pos - motion.qpos[:, act_qadr]).max(axis=1) > 1e-6)
+    data = mujoco.MjData(model)
+
+    def depth(qpos, t):
+        data.qpos[:] = qpos
+        mujoco.mj_kinematics(model, data)
+        world = data.xpos[probes.body_ids] + np.einsum("nij,nj->ni", data.xmat[probes.body_ids].reshape(-1, 3, 3),
+                                                       probes.local)
+        rot = np.zeros(9)
+        mujoco.mju_quat2Mat(rot, motion.object_quat_wxyz[t])
+        dist, _ = hull.signed_distance((world - motion.object_pos[t]) @ rot.reshape(3, 3))
+        return float((probes.radius - dist).max())
+
+    gains = []
+    for t in squeezed:
+        target = motion.qpos[t].copy()
+        target[act_qadr] = motion.joint_pos[t]
+        gains.append(depth(target, t) - depth(motion.qpos[t], t))
+    assert len(gains) > 30
+    return float(np.mean(gains))
+
+
+def test_surface_squeeze_presses_the_hands_into_the_object():
+    """squeeze_toward="surface": a holding hand's PD targets go into the object's nearest face, so a push presses
+    on the box. Toward the other hand (the default), the hands of embedded:push, which rest on the box's top edge,
+    slide along it instead."""
+    from dataclasses import replace
+
+    from robot_hoi.embodiment import build_model, load_embodiment
+    from robot_hoi.retarget.pipeline import RetargetOptions, retarget_clip
+    from robot_hoi.tasks.interaction import factory
+
+    embodiment = load_embodiment("g1_inspire")
+    model = build_model(embodiment)
+    clip = factory.load_source("embedded:push")
+    gains = {}
+    for toward in ("other_hand", "surface"):
+        options = RetargetOptions()
+        options = replace(options, executable=replace(options.executable, compensate_loads=False,
+                                                      squeeze_toward=toward))
+        gains[toward] = _squeeze_depth_gain(retarget_clip(clip, embodiment, model, options=options), model)
+    assert gains["surface"] > 0.03
+    assert gains["surface"] > gains["other_hand"] + 0.01

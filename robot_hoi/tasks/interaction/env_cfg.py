@@ -129,6 +129,9 @@ class InteractionEnvCfg:
     retarget_dynamics: bool = False
     # fraction of the fingers' open->closed stroke while a hand holds (None: the retarget's GraspRule default, 0.6)
     retarget_finger_closure: float | None = None
+    # where a holding hand's PD targets squeeze: "other_hand" | "surface" (into the nearest face: pushes; retarget
+    # ExecutableSettings.squeeze_toward; None: the retarget's "other_hand"). Recorded in the cached retarget
+    retarget_squeeze_toward: str | None = None
     # what the object collides as: "hull" (its convex hull; checkpoints without the key) | "decomposed" (its convex
     # pieces, ObjectAsset.convex_parts: a hand reaches under a table's top). The retarget keeps the hands out of
     # the same shape; recorded in the cached retarget like leg loads

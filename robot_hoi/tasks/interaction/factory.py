@@ -91,18 +91,22 @@ _RETARGET_SETTINGS = (
     ("retarget_leg_loads", ("executable", "compensate_leg_loads"), "leg-load compensation"),
     ("retarget_dynamics", ("executable", "compensate_dynamics"), "dynamics compensation"),
     ("retarget_finger_closure", ("grasp", "closure"), "finger closure"),
+    ("retarget_squeeze_toward", ("executable", "squeeze_toward"), "squeeze"),
     ("object_collision", ("mapping", "object_collision"), "object collision shape"),
 )
 
 
 def retarget_options(env_cfg: InteractionEnvCfg | None = None):
     """RetargetOptions with the task's retarget settings (the retarget's defaults where the config has none)."""
+    from robot_hoi.retarget.executable import check_squeeze_toward
     from robot_hoi.retarget.hands import check_closure
     from robot_hoi.retarget.pipeline import RetargetOptions
 
     options = RetargetOptions()
     if getattr(env_cfg, "retarget_finger_closure", None) is not None:
         check_closure(env_cfg.retarget_finger_closure, "env.retarget_finger_closure")
+    if getattr(env_cfg, "retarget_squeeze_toward", None) is not None:
+        check_squeeze_toward(env_cfg.retarget_squeeze_toward, "env.retarget_squeeze_toward")
     for field, (group, name), _ in _RETARGET_SETTINGS:
         value = getattr(env_cfg, field, None) if env_cfg is not None else None
         if value is not None:
