@@ -24,6 +24,11 @@ class Thresholds:
     # A required hand contact also counts as kept while a hand link (wrist or fingertip) is within this distance
     # of the object surface: the retargeted hands rest ~1 cm off the hull, and a grip is a few mm of squeeze.
     contact_tolerance: float = 0.02
+    # ... measured from where the reference's own hand links are (their distance to the surface + the tolerance):
+    # the Inspire hand's links are not where a human hand's joints were, and on sub2_largetable_000's edge grip
+    # the retargeted wrists and fingertips sit 5-8 cm off the table while their collision geometry is within a few
+    # mm of it, so a policy tracking the reference exactly lost "contact" 10 frames after the grip began
+    contact_from_reference: bool = True
 
 
 def hand_link_groups(link_names) -> list[list[int]]:
@@ -57,10 +62,11 @@ def interaction_distance_error(w_d, d, d_hat):
     return abs((w_d * norm(d)).sum(-1) - (w_d * norm(d_hat)).sum(-1))
 
 
-def contact_loss_count(count, need, touching, nearest_hand_distance, tolerance: float):
+def contact_loss_count(count, need, touching, nearest_hand_distance, tolerance: float, reference_distance=0.0):
     """Consecutive frames each required hand contact has been missing: +1 where needed and neither touching nor
-    within `tolerance` of the surface, else reset to 0. Shapes (..., 2) for left / right."""
-    missing = need & ~(touching | (nearest_hand_distance < tolerance))
+    within `tolerance` of the surface (beyond `reference_distance`, the reference hand's own distance), else reset
+    to 0. Shapes (..., 2) for left / right."""
+    missing = need & ~(touching | (nearest_hand_distance < reference_distance + tolerance))
     return (count + 1) * missing
 
 

@@ -123,10 +123,12 @@ class EpisodeMonitor(OperatorInput):
 
         th = self.thresholds
         if self.ref.hand_contact is not None and tick > self.warmup_frames:  # training: not during warmup
-            distance = np.linalg.norm(d, axis=-1)
+            distance, ref_distance = np.linalg.norm(d, axis=-1), np.linalg.norm(self.ref.d_hat[f], axis=-1)
             nearest = np.array([distance[ids].min() for ids in self._hand_links])
+            ref_nearest = np.array([ref_distance[ids].min() for ids in self._hand_links])
             self.contact_loss = termination.contact_loss_count(
-                self.contact_loss, self.ref.hand_contact[f], world.hand_contact(), nearest, th.contact_tolerance)
+                self.contact_loss, self.ref.hand_contact[f], world.hand_contact(), nearest, th.contact_tolerance,
+                ref_nearest if th.contact_from_reference else 0.0)
         ended = termination.reasons(th, np.float64(link_err), world.data.qpos[2], np.float64(obj_err),
                                     np.float64(inter_err), self.contact_loss)
         reasons = [name for name, hit in ended.items() if hit]

@@ -46,21 +46,28 @@ def _face_points() -> np.ndarray:
     return np.array([(0.0, y, z) for y in grid for z in grid])
 
 
-def _run_monitor(left_wrist_gap: float, ticks: int, max_frames: int = 3):
+def _hand_links(left_wrist_gap: float) -> np.ndarray:
+    return np.array([[-0.5, 0.0, 0.0], [-left_wrist_gap, 0.0, 0.0], [-0.12, 0.03, 0.0],
+                     [-0.3, -0.3, 0.0], [-0.3, -0.35, 0.0]])
+
+
+def _run_monitor(left_wrist_gap: float, ticks: int, max_frames: int = 3, ref_wrist_gap: float | None = None,
+                 **thresholds):
     """EpisodeMonitor over `ticks` policy steps, the left hand required to touch, its wrist `left_wrist_gap` in
-    front of the face, the robot exactly on its reference. Returns the monitor."""
+    front of the face; the reference's wrist `ref_wrist_gap` in front of it (default: the robot exactly on its
+    reference). Returns the monitor."""
     from sim2sim.monitor import EpisodeMonitor, ReferenceTrack, Thresholds
 
-    links = np.array([[-0.5, 0.0, 0.0], [-left_wrist_gap, 0.0, 0.0], [-0.08, 0.03, 0.0],
-                      [-0.3, -0.3, 0.0], [-0.3, -0.35, 0.0]])
+    links = _hand_links(left_wrist_gap)
+    ref_links = _hand_links(left_wrist_gap if ref_wrist_gap is None else ref_wrist_gap)
     frames = ticks + 1
-    motion = SimpleNamespace(link_pos=np.repeat(links[None], frames, 0),
+    motion = SimpleNamespace(link_pos=np.repeat(ref_links[None], frames, 0),
                              object_pos=np.zeros((frames, 3)),
                              object_quat_wxyz=np.repeat(np.array([[1.0, 0.0, 0.0, 0.0]]), frames, 0))
     need = np.zeros((frames, 2), dtype=bool)
     need[:, 0] = True
     ref = ReferenceTrack.build(motion, _face_points(), need)
-    monitor = EpisodeMonitor(_World(links), ref, Thresholds(max_contact_loss_frames=max_frames),
+    monitor = EpisodeMonitor(_World(links), ref, Thresholds(max_contact_loss_frames=max_frames, **thresholds),
                              last_frame=frames + 10, keep_qpos=False)
     for tick in range(1, ticks + 1):
         monitor.on_policy_step(tick)
@@ -75,9 +82,21 @@ def test_sim2sim_contact_check_honours_the_tolerance():
     near = _run_monitor(0.01, ticks=10)
     assert not near.finished and near.terminations == []
     assert near.contact_loss.tolist() == [0, 0]
-    far = _run_monitor(0.05, ticks=10)
+    far = _run_monitor(0.05, ticks=10, ref_wrist_gap=0.01)
     assert far.terminations == ["contact_lost"]
     assert far.ticks[-1] == 4  # counts 1, 2, 3, 4 > 3
+
+
+def test_contact_tolerance_counts_from_the_reference_hand():
+    """Where the reference's own hand links sit 6 cm off the surface (an Inspire hand on a table's edge: its links
+    are not where the human's joints were), a robot tracking it exactly keeps the contact, 1 cm further too; 3 cm
+    further (beyond the 2 cm tolerance) it is lost. Measured from the surface alone (the old rule, still
+    selectable), the robot on its reference lost the contact after max_contact_loss_frames + 1 steps."""
+    assert _run_monitor(0.06, ticks=10).terminations == []
+    assert _run_monitor(0.07, ticks=10, ref_wrist_gap=0.06).terminations == []
+    assert _run_monitor(0.09, ticks=10, ref_wrist_gap=0.06).terminations == ["contact_lost"]
+    old_rule = _run_monitor(0.06, ticks=10, contact_from_reference=False)
+    assert old_rule.terminations == ["contact_lost"] and old_rule.ticks[-1] == 4
 
 
 def test_termination_functions_agree_on_numpy_and_torch():
@@ -118,6 +137,9 @@ def test_termination_functions_agree_on_numpy_and_torch():
     loss = both(T.contact_loss_count, count, need, touching, nearest, 0.02)
     assert loss.dtype.kind == "i"
     np.testing.assert_array_equal(loss, np.where(need & ~touching & (nearest >= 0.02), count + 1, 0))
+    ref_nearest = rng.uniform(0.0, 0.05, size=(n, 2))
+    relative = both(T.contact_loss_count, count, need, touching, nearest, 0.02, ref_nearest)
+    np.testing.assert_array_equal(relative, np.where(need & ~touching & (nearest >= ref_nearest + 0.02), count + 1, 0))
     reasons = both(T.reasons, th, link_err, root_height, obj_err, inter_err, loss)
     assert reasons["contact_lost"].tolist() == (loss.max(-1) > 3).tolist()
     # one env at a time, as sim2sim calls it (scalars and a (2,) count)
