@@ -34,8 +34,9 @@ class ExecutableSettings:
     squeeze_depth: float = 0.06       # m the held hands' PD targets go past the surface (see squeeze_toward)
     # "other_hand": toward the other wrist (a two-hand grip of a box's sides). "surface": into the object along the
     # inward normal of the face nearest the hand, so a push presses into the box (one hand too). A zero-residual
-    # replay of sub8_largebox_000 (a two-hand push) from frame 30: "other_hand" left the box behind the reference
-    # by 19 cm in 0.8 s with no hand touching it
+    # replay of sub8_largebox_000 (a two-hand push) from frame 30: "other_hand" left the box 19 cm behind the
+    # reference after 0.8 s with no hand touching it, "surface" 16 cm with the hands touching part of the time (its
+    # hands rest on the box's top edge and press down more than forward); a 4-minute teacher: 0.84 s both ways
     squeeze_toward: str = "other_hand"
     squeeze_damping: float = 1e-3     # damped least squares (m^2)
     compensate_loads: bool = True     # PD targets offset by the static gravity / held-object torque over kp

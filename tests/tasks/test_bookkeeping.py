@@ -91,7 +91,9 @@ def test_contact_loss_counted_once_per_step_whatever_other_envs_do(scene):
     reference.hand_contact[:, 0] = True
     counts, fired_on = {}, {}
     for num_envs, reset_env0 in ((2, False), (2, True), (5, True)):
-        env = make_env(scene, [reference], num_envs=num_envs, terminations={"max_contact_loss_frames": max_frames})
+        # the surface rule: the standing reference's own hand is as far from the box as the robot's
+        env = make_env(scene, [reference], num_envs=num_envs,
+                       terminations={"max_contact_loss_frames": max_frames, "contact_from_reference": False})
         forced = torch.zeros(num_envs, dtype=torch.bool)
         forced[0] = reset_env0
         record = force_terminations(env, lambda _step, forced=forced: forced)
