@@ -62,11 +62,12 @@ def interaction_distance_error(w_d, d, d_hat):
     return abs((w_d * norm(d)).sum(-1) - (w_d * norm(d_hat)).sum(-1))
 
 
-def contact_loss_count(count, need, touching, nearest_hand_distance, tolerance: float, reference_distance=0.0):
+def contact_loss_count(count, need, touching, nearest_hand_distance, th: Thresholds, reference_distance):
     """Consecutive frames each required hand contact has been missing: +1 where needed and neither touching nor
-    within `tolerance` of the surface (beyond `reference_distance`, the reference hand's own distance), else reset
-    to 0. Shapes (..., 2) for left / right."""
-    missing = need & ~(touching | (nearest_hand_distance < reference_distance + tolerance))
+    within `th.contact_tolerance` of the surface (beyond `reference_distance`, the reference hand's own distance,
+    with `th.contact_from_reference`), else reset to 0. Shapes (..., 2) for left / right."""
+    reach = reference_distance + th.contact_tolerance if th.contact_from_reference else th.contact_tolerance
+    missing = need & ~(touching | (nearest_hand_distance < reach))
     return (count + 1) * missing
 
 

@@ -134,11 +134,13 @@ def test_termination_functions_agree_on_numpy_and_torch():
     obj_err = both(T.mean_object_point_error, pts, ref_pts)
     inter_err = both(T.interaction_distance_error, w, d, d_hat)
     both(T.norm, d)
-    loss = both(T.contact_loss_count, count, need, touching, nearest, 0.02)
+    surface_rule = T.Thresholds(contact_tolerance=0.02, contact_from_reference=False)
+    loss = both(T.contact_loss_count, count, need, touching, nearest, surface_rule, rng.uniform(0.0, 0.05, (n, 2)))
     assert loss.dtype.kind == "i"
     np.testing.assert_array_equal(loss, np.where(need & ~touching & (nearest >= 0.02), count + 1, 0))
     ref_nearest = rng.uniform(0.0, 0.05, size=(n, 2))
-    relative = both(T.contact_loss_count, count, need, touching, nearest, 0.02, ref_nearest)
+    relative = both(T.contact_loss_count, count, need, touching, nearest, T.Thresholds(contact_tolerance=0.02),
+                    ref_nearest)
     np.testing.assert_array_equal(relative, np.where(need & ~touching & (nearest >= ref_nearest + 0.02), count + 1, 0))
     reasons = both(T.reasons, th, link_err, root_height, obj_err, inter_err, loss)
     assert reasons["contact_lost"].tolist() == (loss.max(-1) > 3).tolist()

@@ -430,12 +430,9 @@ class IKSolver:
         self._object = None
         return qpos
 
-    def hand_gaps(self, qpos: np.ndarray, frames, object_track, probe_sets: list[np.ndarray]
-                  ) -> tuple[np.ndarray, np.ndarray]:
-        """For each of `frames` and each probe set (indices into the probes, e.g. one hand's): the smallest gap
-        between its probe spheres and the object's collision shape (hull distance - radius; < 0 inside) and the
-        outward world normal of that face. Returns ((F, S), (F, S, 3))."""
-        gaps = np.zeros((len(frames), len(probe_sets)))
+    def nearest_face_normals(self, qpos: np.ndarray, frames, object_track, probe_sets: list[np.ndarray]) -> np.ndarray:
+        """(F, S, 3): for each of `frames` and each probe set (indices into the probes, e.g. one hand's), the outward
+        world normal of the object face nearest the set's probe spheres."""
         normals = np.zeros((len(frames), len(probe_sets), 3))
         for i, t in enumerate(frames):
             self.data.qpos[:] = qpos[t]
@@ -443,10 +440,9 @@ class IKSolver:
             self._object = self._object_at(object_track, int(t))
             _, depth, face_normals = self._probe_depths()
             for k, probes in enumerate(probe_sets):
-                nearest = probes[np.argmax(depth[probes])]
-                gaps[i, k], normals[i, k] = -depth[nearest], face_normals[nearest]
+                normals[i, k] = face_normals[probes[np.argmax(depth[probes])]]
         self._object = None
-        return gaps, normals
+        return normals
 
     @staticmethod
     def _object_at(track, t: int) -> tuple[HullPlanes, np.ndarray, np.ndarray]:

@@ -190,14 +190,14 @@ def _depenetrate(solver: IKSolver, result: IKResult, targets: RobotTargets, trac
 
 
 def _squeeze(model: mujoco.MjModel, cfg, qpos: np.ndarray, hold: dict[str, np.ndarray], fps: float,
-             options: RetargetOptions, solver: IKSolver | None = None, track=None) -> np.ndarray:
+             options: RetargetOptions, solver: IKSolver, track) -> np.ndarray:
     """(T, nq) grasp-squeeze offsets for the PD targets (executable.py), ramped like the finger closure (at the
-    same rate; flat fingers, closure 0, still squeeze). Into the surface needs `solver` (its hand probes) and the
-    object `track`."""
+    same rate; flat fingers, closure 0, still squeeze). Into the surface needs the object `track` (None: no
+    object) and the solver's hand probes."""
     settings = options.executable
     into_surface = settings.squeeze_toward == "surface"
     sides = ("left", "right")
-    if settings.squeeze_depth <= 0 or set(hold) != set(sides) or (into_surface and (solver is None or track is None)):
+    if settings.squeeze_depth <= 0 or set(hold) != set(sides) or (into_surface and track is None):
         return np.zeros_like(qpos)
     full_stroke = replace(options.grasp, closure=1.0)
     ramp = {side: closure_profile(hold[side], fps, full_stroke) for side in sides}
@@ -216,7 +216,7 @@ def _into_surface(solver: IKSolver, qpos: np.ndarray, track, wrists: dict[str, s
     probe_sets = [np.flatnonzero(solver.probes.hand & np.isin(solver.probes.body_ids, subtree(
         model, mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, wrists[side])))) for side in sides]
     frames = np.flatnonzero(sum(ramp.values()) > 0)
-    _, normals = solver.hand_gaps(qpos, frames, track, probe_sets)
+    normals = solver.nearest_face_normals(qpos, frames, track, probe_sets)
     out = {side: np.zeros((len(qpos), 3)) for side in sides}
     for k, side in enumerate(sides):
         out[side][frames] = -normals[:, k]

@@ -332,10 +332,8 @@ class InteractionEnv:
         distance, ref_distance = self.d.norm(dim=-1), self.ref.d_hat.norm(dim=-1)
         near = torch.stack([distance[:, ids].amin(-1) for ids in self.scene.hand_link_ids], dim=-1)
         ref_near = torch.stack([ref_distance[:, ids].amin(-1) for ids in self.scene.hand_link_ids], dim=-1)
-        th = self.cfg.terminations
         self.contact_loss_frames = termination.contact_loss_count(
-            self.contact_loss_frames, need, self.hand_contact_found, near, th.contact_tolerance,
-            ref_near if th.contact_from_reference else 0.0)
+            self.contact_loss_frames, need, self.hand_contact_found, near, self.cfg.terminations, ref_near)
 
     def reference_at(self, k: int) -> ReferenceFrame:
         idx = torch.minimum(self.ref_index + k, self._clip_end()) if k else self.ref_index
