@@ -83,9 +83,11 @@ def add_object(spec: mujoco.MjSpec, vertices: np.ndarray, faces: np.ndarray, *, 
         mesh.uservert = shape.astype(np.float32).ravel()
         if shape_faces is not None:
             mesh.userface = shape_faces.astype(np.int32).ravel()
+        # priority 1: MuJoCo takes the larger friction of two equal-priority geoms, and the floor and the robot
+        # have 1.0, so `friction` (supp. Table A's 0.9 for object and ground) would act only above 1.0
         body.add_geom(type=mujoco.mjtGeom.mjGEOM_MESH, meshname=name, density=density,
                       friction=[friction, torsional_friction or 0.005, 0.0001],
-                      condim=4 if torsional_friction > 0 else 3,
+                      condim=4 if torsional_friction > 0 else 3, priority=1,
                       contype=contype, conaffinity=conaffinity, rgba=[0.8, 0.55, 0.3, 1.0])
 
 
