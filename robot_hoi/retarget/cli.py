@@ -43,6 +43,9 @@ def register(subparsers) -> None:
                    help="where a holding hand's PD targets squeeze: toward the other hand (default; a two-hand grip) "
                         "or into the object's nearest face (a push); training: "
                         "--set env.retarget_squeeze_toward=surface")
+    p.add_argument("--fingertip-underside-reach", type=float, default=None, metavar="M",
+                   help="fingertip targets at most M under an underside of the object (a tabletop) move up onto it "
+                        "(0.15 reaches them; default 0: off); training: --set env.retarget_fingertip_underside_reach=M")
     add_clip_options(p, "--objects-dir")  # --objects-dir: the old spelling, kept working
     p.add_argument("--object-collision", choices=("hull", "decomposed"), default=None,
                    help="what the object collides as: its convex hull or its convex pieces (CoACD; a hand reaches "
@@ -89,6 +92,11 @@ def run(args: argparse.Namespace) -> int:
                                          compensate_dynamics=args.dynamics))
     if args.squeeze_toward is not None:
         options = replace(options, executable=replace(options.executable, squeeze_toward=args.squeeze_toward))
+    if args.fingertip_underside_reach is not None:
+        if args.fingertip_underside_reach < 0:
+            raise UserError(f"--fingertip-underside-reach must be >= 0 m, got {args.fingertip_underside_reach}")
+        options = replace(options, mapping=replace(options.mapping,
+                                                   fingertip_underside_reach=args.fingertip_underside_reach))
     if args.finger_closure is not None:
         closure = check_closure(args.finger_closure, "--finger-closure")
         options = replace(options, grasp=replace(options.grasp, closure=closure))

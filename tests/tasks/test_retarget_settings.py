@@ -102,3 +102,15 @@ def test_a_cached_reference_of_another_version_of_the_clip_is_refused(tmp_path):
         factory.load_or_retarget(moved, embodiment, tmp_path)
     with pytest.raises(UserError, match=r"another version.*frames, the clip has"):
         factory.load_or_retarget(clip.select_frames(slice(0, clip.num_frames - 5)), embodiment, tmp_path)
+
+
+def test_fingertip_underside_reach_reaches_the_reference_and_guards_the_cache(tmp_path, table_object):
+    embodiment = load_embodiment("g1_inspire")
+    clip = replace(factory.load_source("embedded:lift_place"), object=table_object)
+    on = InteractionEnvCfg(num_envs=2, backend="cpu", object_collision="decomposed",
+                           retarget_fingertip_underside_reach=0.15)
+    motion = factory.load_or_retarget(clip, embodiment, tmp_path, factory.retarget_options(on))
+    assert motion.meta["mapping"]["fingertip_underside_reach"] == 0.15
+    with pytest.raises(UserError, match=r"fingertip underside reach 0.15, the task asks for it 0 "):
+        factory.load_or_retarget(clip, embodiment, tmp_path,
+                                 factory.retarget_options(InteractionEnvCfg(object_collision="decomposed")))

@@ -93,6 +93,7 @@ _RETARGET_SETTINGS = (
     ("retarget_finger_closure", ("grasp", "closure"), "finger closure"),
     ("retarget_squeeze_toward", ("executable", "squeeze_toward"), "squeeze"),
     ("object_collision", ("mapping", "object_collision"), "object collision shape"),
+    ("retarget_fingertip_underside_reach", ("mapping", "fingertip_underside_reach"), "fingertip underside reach"),
 )
 
 
