@@ -95,10 +95,10 @@ class TargetMapping:
     # human palm (wrist-to-middle-knuckle midpoint) to the robot hand's size first, so the palms coincide.
     hand_size_fit: bool = True
     # OMOMO hands are flat (no finger capture): a human pinching a tabletop's edge has straight fingers pointing
-    # down past it, and the robot's fingertips followed them 8-13 cm below the top (sub2_largetable_000), so its
-    # hands could not lift or drag the table. A fingertip target near the object (anchored at all) with the
-    # object's underside (a face whose normal points down) at most this far straight above it is moved up to
-    # object_clearance below that face (0.15 m reaches them). Off (0) by default: measured on sub2_largetable_000
+    # down past it, and the robot's fingertips follow them 8-13 cm below the top (sub2_largetable_000). A fingertip
+    # target near the object (anchored at all) with the object's underside (a face whose normal points down) at
+    # most this far straight above it is moved up to object_clearance below that face (0.15 m reaches them).
+    # Off (0) by default: measured on sub2_largetable_000
     # (fingers closed, squeeze into the surface) the root-held zero-residual replay from frame 50 keeps the table
     # within 0.12 m for ~38 frames with or without it, and a 30-min teacher tracks 2.27 s either way (README).
     fingertip_underside_reach: float = 0.0  # m
