@@ -7,8 +7,8 @@
 - Squeeze. Position targets that put the hands exactly on the object hold nothing: the PD servos produce force
   only from an error. While a hand holds the object, its arm's PD targets are moved so the hand would go
   `squeeze_depth` further toward the other hand, or into the object's nearest face (`squeeze_toward`; damped
-  least squares on the wrist Jacobian of the shoulder and elbow joints). Only the PD targets (`joint_pos`) carry the squeeze; the reference states and link targets do
-  not, so the rewards still ask for the hands on the surface.
+  least squares on the wrist Jacobian of the shoulder and elbow joints). Only the PD targets (`joint_pos`) carry
+  the squeeze; the reference states and link targets do not, so the rewards still ask for the hands on the surface.
 - Load compensation. A PD servo settles where its error balances the load: with the G1's arm gains the bent-over
   arms sagged 9 cm below the reference and the gripped box hung at the hands' height instead of below the grip,
   tilted and slipped out. The waist and arm PD targets are offset by tau / kp, tau the static torque that holds the
