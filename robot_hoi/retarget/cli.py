@@ -43,6 +43,9 @@ def register(subparsers) -> None:
                    help="where a holding hand's PD targets squeeze: toward the other hand (default; a two-hand grip) "
                         "or into the object's nearest face (a push); training: "
                         "--set env.retarget_squeeze_toward=surface")
+    p.add_argument("--squeeze-depth", type=float, default=None, metavar="M",
+                   help="how far past the surface a holding hand's PD targets squeeze (default 0.06 m); training: "
+                        "--set env.retarget_squeeze_depth=M")
     p.add_argument("--fingertip-underside-reach", type=float, default=None, metavar="M",
                    help="fingertip targets at most M under an underside of the object (a tabletop) move up onto it "
                         "(0.15 reaches them; default 0: off); training: --set env.retarget_fingertip_underside_reach=M")
@@ -73,6 +76,7 @@ def run(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
     from robot_hoi.embodiment import build_model, load_embodiment
+    from robot_hoi.retarget.executable import check_squeeze_depth
     from robot_hoi.retarget.hands import check_closure
     from robot_hoi.retarget.pipeline import RetargetOptions, retarget_clip
     from robot_hoi.retarget.report import build_report, format_report
@@ -92,6 +96,9 @@ def run(args: argparse.Namespace) -> int:
                                          compensate_dynamics=args.dynamics))
     if args.squeeze_toward is not None:
         options = replace(options, executable=replace(options.executable, squeeze_toward=args.squeeze_toward))
+    if args.squeeze_depth is not None:
+        depth = check_squeeze_depth(args.squeeze_depth, "--squeeze-depth")
+        options = replace(options, executable=replace(options.executable, squeeze_depth=depth))
     if args.fingertip_underside_reach is not None:
         if args.fingertip_underside_reach < 0:
             raise UserError(f"--fingertip-underside-reach must be >= 0 m, got {args.fingertip_underside_reach}")

@@ -87,6 +87,15 @@ def check_squeeze_toward(value: str, name: str) -> str:
     return value
 
 
+def check_squeeze_depth(value: float, name: str) -> float:
+    """A user-given squeeze depth in metres (`name`: the flag or config key it came from)."""
+    from robot_hoi.errors import UserError
+
+    if not 0.0 <= value <= 0.3:
+        raise UserError(f"{name} must be within [0, 0.3] m (how far past the surface the hands squeeze), got {value}")
+    return value
+
+
 def squeeze_offsets(model: mujoco.MjModel, qpos: np.ndarray, closure: dict[str, np.ndarray],
                     wrist_bodies: dict[str, str], arm_joints: dict[str, list[str]],
                     settings: ExecutableSettings, directions: dict[str, np.ndarray] | None = None) -> np.ndarray:

@@ -114,3 +114,33 @@ def test_fingertip_underside_reach_reaches_the_reference_and_guards_the_cache(tm
     with pytest.raises(UserError, match=r"fingertip underside reach 0.15, the task asks for it 0 "):
         factory.load_or_retarget(clip, embodiment, tmp_path,
                                  factory.retarget_options(InteractionEnvCfg(object_collision="decomposed")))
+
+
+def test_squeeze_depth_scales_the_arm_squeeze_and_guards_the_cache(tmp_path):
+    """A deeper squeeze moves only the holding arms' PD targets, further than the default does (twice the depth,
+    about twice the offset); the states stay; a cache made with another depth is refused; a depth out of range is
+    an error naming the key."""
+    embodiment = load_embodiment("g1_inspire")
+    clip = factory.load_source("embedded:lift_place")
+    plain = factory.load_or_retarget(clip, embodiment, None)
+    deep_cfg = InteractionEnvCfg(num_envs=2, backend="cpu", retarget_squeeze_depth=0.12)
+    deep = factory.load_or_retarget(clip, embodiment, tmp_path, factory.retarget_options(deep_cfg))
+    assert deep.meta["executable"]["squeeze_depth"] == 0.12
+    np.testing.assert_allclose(deep.qpos, plain.qpos, atol=1e-6)
+
+    names = list(deep.actuator_names)
+    arms = [names.index(n) for n in names if "shoulder" in n or "elbow" in n]
+    legs = [names.index(n) for n in names if any(k in n for k in ("hip", "knee", "ankle"))]
+    no_squeeze = replace(factory.retarget_options(), executable=replace(factory.retarget_options().executable,
+                                                                        squeeze_depth=0.0))
+    bare = factory.load_or_retarget(clip, embodiment, None, no_squeeze).joint_pos
+    default_offset = np.abs(plain.joint_pos[:, arms] - bare[:, arms]).max()
+    deep_offset = np.abs(deep.joint_pos[:, arms] - bare[:, arms]).max()
+    assert default_offset > 0.02
+    assert 1.6 * default_offset < deep_offset < 2.4 * default_offset
+    np.testing.assert_allclose(deep.joint_pos[:, legs], plain.joint_pos[:, legs], atol=1e-6)
+
+    with pytest.raises(UserError, match=r"squeeze depth 0.12, the task asks for it 0.06"):
+        factory.load_or_retarget(clip, embodiment, tmp_path, factory.retarget_options(InteractionEnvCfg()))
+    with pytest.raises(UserError, match=r"env.retarget_squeeze_depth must be within"):
+        factory.retarget_options(InteractionEnvCfg(retarget_squeeze_depth=-0.1))

@@ -132,6 +132,9 @@ class InteractionEnvCfg:
     # where a holding hand's PD targets squeeze: "other_hand" | "surface" (into the nearest face: pushes; retarget
     # ExecutableSettings.squeeze_toward; None: the retarget's "other_hand"). Recorded in the cached retarget
     retarget_squeeze_toward: str | None = None
+    # m the holding hands' PD targets go past the surface (retarget ExecutableSettings.squeeze_depth; None: the
+    # retarget's 0.06). Recorded in the cached retarget
+    retarget_squeeze_depth: float | None = None
     # m: fingertip targets this far (at most) under an underside of the object move up onto it (retarget
     # TargetMapping.fingertip_underside_reach; None: the retarget's 0, off). Recorded in the cached retarget
     retarget_fingertip_underside_reach: float | None = None

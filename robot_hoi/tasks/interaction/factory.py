@@ -92,6 +92,7 @@ _RETARGET_SETTINGS = (
     ("retarget_dynamics", ("executable", "compensate_dynamics"), "dynamics compensation"),
     ("retarget_finger_closure", ("grasp", "closure"), "finger closure"),
     ("retarget_squeeze_toward", ("executable", "squeeze_toward"), "squeeze"),
+    ("retarget_squeeze_depth", ("executable", "squeeze_depth"), "squeeze depth"),
     ("object_collision", ("mapping", "object_collision"), "object collision shape"),
     ("retarget_fingertip_underside_reach", ("mapping", "fingertip_underside_reach"), "fingertip underside reach"),
 )
@@ -99,7 +100,7 @@ _RETARGET_SETTINGS = (
 
 def retarget_options(env_cfg: InteractionEnvCfg | None = None):
     """RetargetOptions with the task's retarget settings (the retarget's defaults where the config has none)."""
-    from robot_hoi.retarget.executable import check_squeeze_toward
+    from robot_hoi.retarget.executable import check_squeeze_depth, check_squeeze_toward
     from robot_hoi.retarget.hands import check_closure
     from robot_hoi.retarget.pipeline import RetargetOptions
 
@@ -108,6 +109,8 @@ def retarget_options(env_cfg: InteractionEnvCfg | None = None):
         check_closure(env_cfg.retarget_finger_closure, "env.retarget_finger_closure")
     if getattr(env_cfg, "retarget_squeeze_toward", None) is not None:
         check_squeeze_toward(env_cfg.retarget_squeeze_toward, "env.retarget_squeeze_toward")
+    if getattr(env_cfg, "retarget_squeeze_depth", None) is not None:
+        check_squeeze_depth(env_cfg.retarget_squeeze_depth, "env.retarget_squeeze_depth")
     for field, (group, name), _ in _RETARGET_SETTINGS:
         value = getattr(env_cfg, field, None) if env_cfg is not None else None
         if value is not None:
