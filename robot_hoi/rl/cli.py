@@ -37,8 +37,9 @@ def register(subparsers) -> None:
     p.add_argument("--config", default=None, help="a training YAML instead of the preset")
     p.add_argument("--task-config", default=str(TASK_CONFIG), help="environment YAML")
     p.add_argument("--rewards", default=None, metavar="SET",
-                   help="reward formulation: a configs/tasks/rewards/ name (anchor_additive, intermimic_code, "
-                        "intermimic_paper) or YAML path; default: the task config's")
+                   help="reward formulation: a configs/tasks/rewards/ name (anchor_additive, "
+                        "anchor_additive_tight, intermimic_code, intermimic_paper) or YAML path; "
+                        "default: the task config's")
     p.add_argument("--set", dest="overrides", action="append", default=[],
                    help="override, e.g. --set env.num_envs=128 --set ppo.actor_lr=1e-4 (repeatable)")
     p.add_argument("--resume", action="store_true", help="continue each group from its latest checkpoint")
