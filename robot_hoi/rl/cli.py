@@ -8,6 +8,7 @@ from pathlib import Path
 
 from robot_hoi.data.cli_options import add_clip_options, clip_options
 from robot_hoi.paths import CONFIGS_DIR, TASK_CONFIG
+from robot_hoi.tasks.interaction.env_cfg import reward_set_names
 
 SUMMARY_FILE = "teachers.json"  # per-teacher summaries of the last `robot-hoi train` into this run folder
 PRESETS = {"paper": CONFIGS_DIR / "train" / "ppo.yaml", "fast": CONFIGS_DIR / "train" / "ppo_fast.yaml"}
@@ -37,9 +38,8 @@ def register(subparsers) -> None:
     p.add_argument("--config", default=None, help="a training YAML instead of the preset")
     p.add_argument("--task-config", default=str(TASK_CONFIG), help="environment YAML")
     p.add_argument("--rewards", default=None, metavar="SET",
-                   help="reward formulation: a configs/tasks/rewards/ name (anchor_additive, "
-                        "anchor_additive_tight, intermimic_code, intermimic_paper) or YAML path; "
-                        "default: the task config's")
+                   help=f"reward formulation: a configs/tasks/rewards/ name ({', '.join(reward_set_names())}) "
+                        "or YAML path; default: the task config's")
     p.add_argument("--set", dest="overrides", action="append", default=[],
                    help="override, e.g. --set env.num_envs=128 --set ppo.actor_lr=1e-4 (repeatable)")
     p.add_argument("--resume", action="store_true", help="continue each group from its latest checkpoint")
