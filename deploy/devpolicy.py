@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from deploy import __version__
-from deploy._atomic import atomic_write_bytes
+from deploy.atomic import atomic_write_bytes
 from deploy.contract import NUM_HAND_ACTUATORS, OBS_TERMS, ObsTermSpec, PolicyContract, ReferenceInfo, _Dims
 from deploy.embodiment import EmbodimentConfig, load_embodiment
 from deploy.errors import DeployError

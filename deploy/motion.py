@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from deploy._atomic import atomic_write_bytes
+from deploy.atomic import atomic_write_bytes
 from deploy.contract import PolicyContract
 from deploy.errors import DeployError
 

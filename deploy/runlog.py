@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from deploy._atomic import atomic_write_bytes
+from deploy.atomic import atomic_write_bytes
 from deploy.clock import Clock
 
 log = logging.getLogger("deploy.runtime")

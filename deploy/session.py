@@ -18,7 +18,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from deploy._atomic import atomic_write_text
+from deploy.atomic import atomic_write_text
 from deploy.clock import MonotonicClock
 from deploy.contract import check_against_embodiment
 from deploy.embodiment import load_embodiment, resolve_embodiment_path

@@ -1,6 +1,6 @@
 """Write a run's report folder: metrics.json, summary.md, report.html (plots embedded as PNG), videos/*.mp4.
 
-Every file is written atomically (robot_hoi.utils.atomic). `load_previous` reads another run's metrics.json for
+Every file is written atomically (deploy.atomic). `load_previous` reads another run's metrics.json for
 comparison mode.
 """
 
@@ -12,8 +12,8 @@ import json
 import os
 from pathlib import Path
 
+from deploy.atomic import atomic_write_bytes, atomic_write_text
 from robot_hoi.errors import UserError
-from robot_hoi.utils.atomic import atomic_write_bytes, atomic_write_text
 from sim2sim.tables import Table, perturbation_table, result_tables, setup_table
 
 FORMAT = "robot-hoi sim2sim report"

@@ -16,9 +16,9 @@ from pathlib import Path
 
 import numpy as np
 
+from deploy.atomic import atomic_path, atomic_write_text
 from robot_hoi.data.objects import ObjectAsset
 from robot_hoi.errors import DataError, UserError
-from robot_hoi.utils.atomic import atomic_path, atomic_write_text
 
 FORMAT_NAME = "robot-hoi-clip"
 FORMAT_VERSION = 1

@@ -13,11 +13,11 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from deploy.atomic import atomic_path
 from robot_hoi.data.clip import HOIClip
 from robot_hoi.data.layout import BODY_NAMES, BODY_PARENTS
 from robot_hoi.data.objects import to_world
 from robot_hoi.errors import UserError
-from robot_hoi.utils.atomic import atomic_path
 
 SIDE_COLOURS = {"L_": "tab:blue", "R_": "tab:red"}
 MAX_WIREFRAME_FACES = 500  # draw mesh edges for simple meshes, sample points otherwise

@@ -16,6 +16,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
+from deploy.atomic import atomic_write_text
 from robot_hoi.embodiment.collision import (
     COLLISION_GROUP,
     SITE_GROUP,
@@ -27,7 +28,6 @@ from robot_hoi.embodiment.config import EmbodimentConfig
 from robot_hoi.embodiment.spec_types import BodySpec, RobotDescription
 from robot_hoi.errors import UserError
 from robot_hoi.paths import shared_dir
-from robot_hoi.utils.atomic import atomic_write_text
 
 DEFAULT_KEYFRAME = "default"
 FLOOR_GEOM = "floor"

@@ -11,8 +11,8 @@ import os
 import sys
 from pathlib import Path
 
+from deploy.atomic import atomic_path
 from robot_hoi.errors import UserError
-from robot_hoi.utils.atomic import atomic_path
 
 NO_DISPLAY_HINT = (
     "no display found (DISPLAY/WAYLAND_DISPLAY unset), so the interactive viewer cannot open. "

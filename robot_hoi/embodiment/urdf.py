@@ -15,9 +15,9 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from deploy.atomic import atomic_write_text
 from robot_hoi.embodiment.spec_types import BodySpec, GeomSpec, RobotDescription, quat_wxyz_to_matrix
 from robot_hoi.paths import URDF_DIR
-from robot_hoi.utils.atomic import atomic_write_text
 
 COMMITTED_URDF = URDF_DIR / "g1_inspire.urdf"
 _HEADER = (

@@ -19,8 +19,8 @@ import numpy as np
 import onnx
 import torch
 
+from deploy.atomic import atomic_write_bytes
 from robot_hoi.errors import UserError
-from robot_hoi.utils.atomic import atomic_write_bytes
 
 INPUT_NAME = "obs"
 OUTPUT_NAME = "actions"

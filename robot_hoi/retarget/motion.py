@@ -14,8 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
+from deploy.atomic import atomic_write_bytes, atomic_write_text
 from robot_hoi.errors import DataError
-from robot_hoi.utils.atomic import atomic_write_bytes, atomic_write_text
 
 FORMAT_VERSION = 1
 

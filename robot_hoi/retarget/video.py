@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from robot_hoi.utils.atomic import atomic_path
+from deploy.atomic import atomic_path
 
 GL_BACKENDS = ("egl", "osmesa")
 _PROBE = (

@@ -11,11 +11,11 @@ from typing import Any
 
 import torch
 
+from deploy.atomic import atomic_path
 from robot_hoi.errors import UserError
 from robot_hoi.paths import REPO_ROOT
 from robot_hoi.rl.config import TrainConfig
 from robot_hoi.rl.models import ActorCritic
-from robot_hoi.utils.atomic import atomic_path
 
 CHECKPOINT_FORMAT = "robot_hoi.ppo"
 CHECKPOINT_VERSION = 1

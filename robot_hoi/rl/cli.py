@@ -117,6 +117,7 @@ def run(args: argparse.Namespace) -> int:
 
     import torch
 
+    from deploy.atomic import atomic_write_text
     from robot_hoi.embodiment import load_embodiment
     from robot_hoi.errors import UserError
     from robot_hoi.rl.budget import parse_budget
@@ -124,7 +125,6 @@ def run(args: argparse.Namespace) -> int:
     from robot_hoi.rl.teacher_job import PREEMPT_HOOK_ENV, TeacherJob, format_line, print_summary
     from robot_hoi.tasks.interaction import factory
     from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg, apply_reward_set
-    from robot_hoi.utils.atomic import atomic_write_text
     from robot_hoi.utils.config import apply_overrides, load_yaml_dataclass
 
     if args.eval_episodes < 1:

@@ -39,6 +39,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
+from deploy.atomic import atomic_write_text
 from robot_hoi.errors import UserError
 from robot_hoi.rl.checkpoint import latest_checkpoint
 from robot_hoi.rl.teacher_job import (
@@ -47,7 +48,6 @@ from robot_hoi.rl.teacher_job import (
     read_job_state,
     train_teacher_group,
 )
-from robot_hoi.utils.atomic import atomic_write_text
 
 TOKEN_FILE = ".ray_run_token"
 STORAGE_MODES = ("auto", "shared", "local")

@@ -62,7 +62,7 @@ def plot(curves: list[Curve], path: Path, x: str) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from robot_hoi.utils.atomic import atomic_path
+    from deploy.atomic import atomic_path
 
     fig, (ax_s, ax_d) = plt.subplots(2, 1, sharex=True, figsize=(8, 6))
     for curve in curves:

@@ -22,6 +22,7 @@ from typing import Any
 import torch
 from torch import Tensor
 
+from deploy.atomic import atomic_write_text
 from robot_hoi.errors import UserError
 from robot_hoi.rl.budget import Budget
 from robot_hoi.rl.checkpoint import (
@@ -40,7 +41,6 @@ from robot_hoi.rl.models import ActorCritic
 from robot_hoi.rl.ppo import PPO
 from robot_hoi.rl.progress import progress_text, training_progress
 from robot_hoi.rl.step_log import StepLog
-from robot_hoi.utils.atomic import atomic_write_text
 from robot_hoi.utils.timing import OFF
 
 _PPO_SCALARS = {

@@ -27,9 +27,9 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
+from deploy.atomic import atomic_write_text
 from robot_hoi.rl.budget import Budget
 from robot_hoi.rl.checkpoint import latest_checkpoint
-from robot_hoi.utils.atomic import atomic_write_text
 
 JOB_STATE_FILE = "job_state.json"
 EVAL_FILE = "eval.json"

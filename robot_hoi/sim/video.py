@@ -103,7 +103,7 @@ def write_mp4(path: str | Path, frames: Iterable[np.ndarray], fps: float) -> Pat
     """H.264 MP4, written atomically (frames may be a generator)."""
     import imageio.v2 as imageio
 
-    from robot_hoi.utils.atomic import atomic_path
+    from deploy.atomic import atomic_path
 
     path = Path(path)
     with atomic_path(path) as tmp, imageio.get_writer(tmp, fps=fps, codec="libx264", macro_block_size=8,

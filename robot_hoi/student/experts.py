@@ -18,6 +18,7 @@ import json
 
 import torch
 
+from deploy.atomic import atomic_write_text
 from robot_hoi.rl.checkpoint import policy_checkpoint
 from robot_hoi.rl.runner import OnPolicyRunner
 from robot_hoi.student.height_map import HeightMap
@@ -25,7 +26,6 @@ from robot_hoi.student.student_env import StudentEnv
 from robot_hoi.student.task import evaluation_cfg
 from robot_hoi.student.teachers import TeacherMember, TeacherRun
 from robot_hoi.tasks.interaction import factory
-from robot_hoi.utils.atomic import atomic_write_text
 
 IMITATE, INTERACT = 0, 1
 KINDS = ("imitation", "interaction")

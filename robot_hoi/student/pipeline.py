@@ -28,6 +28,7 @@ from pathlib import Path
 
 import torch
 
+from deploy.atomic import atomic_write_text
 from robot_hoi.data.cli_options import clip_options
 from robot_hoi.errors import UserError
 from robot_hoi.rl.budget import Budget, parse_budget
@@ -47,7 +48,6 @@ from robot_hoi.student.task import (
 from robot_hoi.student.teachers import CompositeTeacher, TeacherMember, TeacherRun, load_teacher_runs
 from robot_hoi.tasks.interaction import factory
 from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg
-from robot_hoi.utils.atomic import atomic_write_text
 from robot_hoi.utils.config import apply_overrides, load_dataclass
 
 

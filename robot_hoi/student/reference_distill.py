@@ -26,9 +26,9 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from deploy.atomic import atomic_path
 from robot_hoi.errors import DataError
 from robot_hoi.tasks.interaction.reference import ReferenceMotion, nearest_surface_vectors
-from robot_hoi.utils.atomic import atomic_path
 from robot_hoi.utils.torch_rot import quat_apply
 
 FORMAT = 2  # 2: joint angles clipped into the control range (distilled references of format 1 are re-made)

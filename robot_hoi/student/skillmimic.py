@@ -7,6 +7,7 @@ from pathlib import Path
 
 import torch
 
+from deploy.atomic import atomic_path
 from robot_hoi.errors import UserError
 from robot_hoi.student.ats import AdaptiveTrajectorySampler
 from robot_hoi.student.config import SkillMimicConfig
@@ -20,7 +21,6 @@ from robot_hoi.student.history import (
 from robot_hoi.student.samplers import StartSampler
 from robot_hoi.student.stf import StateTransitionField, StitchedGraph, reference_track
 from robot_hoi.tasks.interaction.mdp.observations import student_observation_spec
-from robot_hoi.utils.atomic import atomic_path
 
 ENCODER_FILE = "history_encoder.pt"
 

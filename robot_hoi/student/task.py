@@ -9,11 +9,11 @@ import re
 from dataclasses import asdict
 from pathlib import Path
 
+from deploy.atomic import atomic_write_text
 from robot_hoi.errors import UserError
 from robot_hoi.tasks.interaction import factory
 from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg
 from robot_hoi.tasks.interaction.mdp.observations import STUDENT_TERMS
-from robot_hoi.utils.atomic import atomic_write_text
 from robot_hoi.utils.config import load_dataclass
 
 TASK_FILE = factory.TASK_FILE

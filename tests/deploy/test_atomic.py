@@ -6,7 +6,7 @@ import os
 
 import pytest
 
-from deploy._atomic import atomic_path, atomic_write_text
+from deploy.atomic import atomic_path, atomic_write_text
 
 
 @pytest.fixture
@@ -31,8 +31,3 @@ def test_a_failed_write_leaves_the_old_file_and_no_temporary(tmp_path):
         raise RuntimeError("crash")
     assert path.read_text() == "old" and sorted(p.name for p in tmp_path.iterdir()) == ["a.txt"]
 
-
-def test_robot_hoi_reexports_the_same_helper():
-    from robot_hoi.utils import atomic
-
-    assert atomic.atomic_write_text is atomic_write_text and atomic.atomic_path is atomic_path

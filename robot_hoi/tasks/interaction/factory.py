@@ -13,9 +13,9 @@ from collections import OrderedDict, defaultdict
 from dataclasses import asdict, replace
 from pathlib import Path
 
+from deploy.atomic import atomic_write_text
 from robot_hoi.errors import UserError
 from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg
-from robot_hoi.utils.atomic import atomic_write_text
 
 EMBEDDED_PREFIX = "embedded:"
 CLIP_SUFFIXES = (".pt", ".npz")

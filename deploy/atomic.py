@@ -1,4 +1,4 @@
-"""Atomic file writes, the one implementation for the project (robot_hoi.utils.atomic re-exports it).
+"""Atomic file writes, the one implementation for the project (deploy, robot_hoi and sim2sim import it).
 
 Write to a temporary file in the target's folder, then rename over the target: a crash or power cut never leaves a
 half-written log, summary or checkpoint where a user expects a good one. It lives in deploy/ because deploy must
