@@ -8,10 +8,12 @@ from pathlib import Path
 
 from robot_hoi.data.cli_options import add_clip_options, clip_options
 from robot_hoi.paths import CONFIGS_DIR, TASK_CONFIG
+from robot_hoi.rl.recipe import FLAGS, RECORD_FILE, recipe_names
 from robot_hoi.tasks.interaction.env_cfg import reward_set_names
 
 SUMMARY_FILE = "teachers.json"  # per-teacher summaries of the last `robot-hoi train` into this run folder
 PRESETS = {"paper": CONFIGS_DIR / "train" / "ppo.yaml", "fast": CONFIGS_DIR / "train" / "ppo_fast.yaml"}
+DEFAULT_BUDGET, DEFAULT_PRESET, DEFAULT_GROUP = "5m", "fast", "subject"
 
 
 def register(subparsers) -> None:
@@ -25,21 +27,27 @@ def register(subparsers) -> None:
                    help="clip files or folders (.pt InterMimic format, .npz native); default: the embedded clip. "
                         "Put the stage (student) before --data, or end the list with --")
     add_clip_options(p)
-    p.add_argument("--group", default="subject", choices=["subject", "object", "clip"],
-                   help="one teacher per group (default: per subject, as InterMimic)")
-    p.add_argument("--budget", default="5m",
+    p.add_argument("--group", default=None, choices=["subject", "object", "clip"],
+                   help="one teacher per group (default: the recipe's, else per subject, as InterMimic)")
+    p.add_argument("--budget", default=None,
                    help="training length, split evenly over the groups: wall time in s, m (minutes), h, d (90s, "
                         "10m, 2h), samples in k, M (millions), G (200k, 5M) or iterations (300it); combine with "
-                        "commas (2h,50M: whichever comes first). Lower-case m is minutes, capital M is millions")
+                        "commas (2h,50M: whichever comes first). Lower-case m is minutes, capital M is millions. "
+                        f"A recipe's budget, else {DEFAULT_BUDGET} (default: {DEFAULT_BUDGET})")
+    p.add_argument("--recipe", default=None, metavar="NAME",
+                   help=f"a run as a file: a configs/recipes/ name ({', '.join(recipe_names())}) or YAML path "
+                        "(robot_hoi/rl/recipe.py); flags and --set given here override it; the run folder records it "
+                        f"as {RECORD_FILE}")
     p.add_argument("--out", default=None, help="run folder (default: ./runs/<date>-<embodiment> in the current "
                                                "directory)")
-    p.add_argument("--preset", default="fast", choices=sorted(PRESETS),
-                   help="PPO settings: paper = InterMimic Table C (tuned for 8192 GPU envs), fast = CPU-sized")
+    p.add_argument("--preset", default=None, choices=sorted(PRESETS),
+                   help="PPO settings: paper = InterMimic Table C (tuned for 8192 GPU envs), fast = CPU-sized "
+                        f"(default: the recipe's, else {DEFAULT_PRESET})")
     p.add_argument("--config", default=None, help="a training YAML instead of the preset")
     p.add_argument("--task-config", default=str(TASK_CONFIG), help="environment YAML")
     p.add_argument("--rewards", default=None, metavar="SET",
                    help=f"reward formulation: a configs/tasks/rewards/ name ({', '.join(reward_set_names())}) "
-                        "or YAML path; default: the task config's")
+                        "or YAML path; default: the recipe's, else the task config's")
     p.add_argument("--set", dest="overrides", action="append", default=[],
                    help="override, e.g. --set env.num_envs=128 --set ppo.actor_lr=1e-4 (repeatable)")
     p.add_argument("--resume", action="store_true", help="continue each group from its latest checkpoint")
@@ -95,13 +103,16 @@ def _stage_from_data(args: argparse.Namespace) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from robot_hoi.errors import UserError
+
     _stage_from_data(args)
+    if args.stage == "student" and args.recipe:
+        raise UserError("--recipe trains teachers; the student's settings are --option and --set")
     if args.backend is not None:
         args.overrides = [*args.overrides, f"env.backend={args.backend}"]
+    recipe = _apply_recipe_flags(args)
     if args.stage == "student":
         if args.cluster != "none":
-            from robot_hoi.errors import UserError
-
             raise UserError("--cluster trains teachers; the student trains here (drop --cluster)")
         import torch
 
@@ -119,7 +130,7 @@ def run(args: argparse.Namespace) -> int:
 
     from deploy.atomic import atomic_write_text
     from robot_hoi.embodiment import load_embodiment
-    from robot_hoi.errors import UserError
+    from robot_hoi.rl import recipe as recipes
     from robot_hoi.rl.budget import parse_budget
     from robot_hoi.rl.config import load_train_config
     from robot_hoi.rl.teacher_job import PREEMPT_HOOK_ENV, TeacherJob, format_line, print_summary
@@ -136,9 +147,14 @@ def run(args: argparse.Namespace) -> int:
     env_cfg = load_yaml_dataclass(InteractionEnvCfg, args.task_config)
     if args.rewards:
         apply_reward_set(env_cfg, args.rewards)
+    if recipe is not None:
+        env_cfg = recipe.apply("env", env_cfg)
     env_cfg = apply_overrides(env_cfg, env_overrides, "--set")
     env_cfg.embodiment = embodiment.name
-    train_cfg = load_train_config(args.config or PRESETS[args.preset], train_overrides)
+    train_cfg = load_train_config(args.config or PRESETS[args.preset])
+    if recipe is not None:
+        train_cfg = recipe.apply("train", train_cfg)
+    train_cfg = apply_overrides(train_cfg, train_overrides, "--set")
     budget = parse_budget(args.budget)
 
     init = base_policy_init(args.init, embodiment.name)
@@ -151,6 +167,8 @@ def run(args: argparse.Namespace) -> int:
     groups = factory.group_sources(sources, clips, args.group)
     out = Path(args.out) if args.out else Path("runs") / f"{time.strftime('%Y%m%d-%H%M%S')}-{embodiment.name}"
     print(f"training {len(groups)} teacher(s) on {len(clips)} clip(s) -> {out}")
+    flags = {key: getattr(args, key) for key in recipes.FLAGS}
+    recipes.write_record(out, recipes.resolved(recipe, flags, args.overrides), recipe)
     per_group = _split_budget(budget, len(groups))
     token = uuid.uuid4().hex
     jobs = [TeacherJob(group=name, sources=[sources[i] for i in members], run_dir=str(out / name),
@@ -183,6 +201,20 @@ def run(args: argparse.Namespace) -> int:
         return 1
     print(f"done: {out}")
     return 0
+
+
+def _apply_recipe_flags(args: argparse.Namespace):
+    """Load --recipe (None without one) and fill the flags not given on the command line from it, then from
+    their defaults."""
+    from robot_hoi.rl.recipe import load_recipe
+
+    recipe = load_recipe(args.recipe) if args.recipe else None
+    settings = recipe.settings if recipe is not None else {}
+    defaults = {"budget": DEFAULT_BUDGET, "preset": DEFAULT_PRESET, "group": DEFAULT_GROUP}
+    for key in FLAGS:
+        if getattr(args, key) is None:
+            setattr(args, key, settings.get(key, defaults.get(key)))
+    return recipe
 
 
 def _split_budget(budget, parts: int):

@@ -37,30 +37,106 @@ def load_yaml_dataclass(cls: type[T], path: str | Path, overrides: list[str] | N
     return apply_overrides(obj, overrides or [], source=str(path))
 
 
+def parse_override(item: str) -> tuple[list[str], Any]:
+    """"dotted.key=value" -> (["dotted", "key"], value parsed as YAML)."""
+    key, sep, raw = item.partition("=")
+    key = key.strip()
+    if not sep or not key:
+        raise UserError(f"override {item!r}: expected dotted.key=value")
+    try:
+        value = yaml.safe_load(raw) if raw.strip() else None
+    except yaml.YAMLError as exc:
+        raise UserError(f"override {item!r}: value is not valid YAML ({exc})") from None
+    return key.split("."), value
+
+
 def apply_overrides(obj: T, overrides: list[str], source: str = "overrides") -> T:
     """Return a copy of dataclass `obj` with "dotted.key=value" overrides applied (values parsed as YAML)."""
     data = dataclasses.asdict(obj)
     for item in overrides:
-        key, sep, raw = item.partition("=")
-        key = key.strip()
-        if not sep or not key:
-            raise UserError(f"override {item!r}: expected dotted.key=value")
-        try:
-            value = yaml.safe_load(raw) if raw.strip() else None
-        except yaml.YAMLError as exc:
-            raise UserError(f"override {item!r}: value is not valid YAML ({exc})") from None
+        parts, value = parse_override(item)
         node = data
-        parts = key.split(".")
         for depth, part in enumerate(parts):
-            if not isinstance(node, dict) or part not in node:
-                where = ".".join(parts[: depth + 1])
-                known = ", ".join(sorted(node)) if isinstance(node, dict) else "(not a section)"
-                raise UserError(f"override {item!r}: unknown key {where!r} (known here: {known})")
+            _check_key(node, parts[: depth + 1], f"override {item!r}")
             if depth == len(parts) - 1:
                 node[part] = value
             else:
                 node = node[part]
     return load_dataclass(type(obj), data, f"{source} + overrides")
+
+
+def apply_changes(obj: T, changes: dict, source: str, prefix: tuple[str, ...] = ()) -> T:
+    """Return a copy of dataclass `obj` with a nested mapping of changes merged in (merge_dicts); every key must
+    exist in `obj`. Errors name `source` (e.g. a file) and the key, under `prefix` (e.g. ("env",))."""
+    data = dataclasses.asdict(obj)
+    _check_keys(data, changes, source, list(prefix))
+    return load_dataclass(type(obj), merge_dicts(data, changes), source)
+
+
+def merge_dicts(base: dict, changes: dict) -> dict:
+    """`base` with `changes` on top: a mapping merges into a mapping key by key, anything else replaces."""
+    out = dict(base)
+    for key, value in changes.items():
+        if isinstance(value, dict) and isinstance(out.get(key), dict):
+            out[key] = merge_dicts(out[key], value)
+        else:
+            out[key] = value
+    return out
+
+
+def read_yaml_chain(name: str | Path, folder: Path, kind: str, keys: set[str]) -> list[tuple[Path, dict]]:
+    """A YAML file of `kind` ("recipe", "reward set") and the files its `base:` names, base first, each as
+    (path, its mapping without `base`). `name` and each base are a name under `folder` or a .yaml/.yml path (a
+    base's path relative to the file naming it); `base: null` or none ends the chain. Top-level keys other than
+    `keys` and `base`, a missing file and a cycle raise UserError naming the file."""
+    chain: list[tuple[Path, dict]] = []
+    seen: list[Path] = []
+    path = _named_yaml(str(name), folder, Path.cwd(), kind, None)
+    while path is not None:
+        if path in seen:
+            cycle = " -> ".join(p.name for p in [*seen[seen.index(path):], path])
+            raise UserError(f"{seen[-1]}: base {path.stem!r} makes a cycle ({cycle})")
+        seen.append(path)
+        try:
+            data = yaml.safe_load(path.read_text())
+        except yaml.YAMLError as exc:
+            raise UserError(f"{path}: not valid YAML ({exc})") from None
+        data = {} if data is None else data
+        if not isinstance(data, dict):
+            raise UserError(f"{path}: a {kind} is a mapping of keys, got {type(data).__name__}")
+        unknown = sorted(set(data) - keys - {"base"})
+        if unknown:
+            raise UserError(f"{path}: unknown key(s) {', '.join(map(str, unknown))} (a {kind} has: base, "
+                            f"{', '.join(sorted(keys))})")
+        base = data.pop("base", None)
+        chain.append((path, data))
+        if base is not None and not isinstance(base, str):
+            raise UserError(f"{path}: base: expected a {kind} name or YAML path, got {base!r}")
+        path = None if base is None else _named_yaml(base, folder, path.parent, kind, path)
+    return chain[::-1]
+
+
+def _named_yaml(name: str, folder: Path, relative_to: Path, kind: str, named_by: Path | None) -> Path:
+    path = relative_to / name if name.endswith((".yaml", ".yml")) else folder / f"{name}.yaml"
+    if not path.is_file():
+        names = ", ".join(sorted(p.stem for p in folder.glob("*.yaml")))
+        where = f"{named_by}: base {name!r}" if named_by else str(path)
+        raise UserError(f"{where}: no such {kind} (choose from {names} or a YAML path)")
+    return path.resolve()
+
+
+def _check_key(node: Any, parts: list[str], where: str) -> None:
+    if not isinstance(node, dict) or parts[-1] not in node:
+        known = ", ".join(sorted(node)) if isinstance(node, dict) else "(not a section)"
+        raise UserError(f"{where}: unknown key {'.'.join(parts)!r} (known here: {known})")
+
+
+def _check_keys(node: dict, changes: dict, source: str, prefix: list[str]) -> None:
+    for key, value in changes.items():
+        parts = [*prefix, str(key)]
+        _check_key(node, parts, source)
+        if isinstance(value, dict) and isinstance(node[key], dict):
+            _check_keys(node[key], value, source, parts)
 
 
 def _convert(tp: Any, value: Any, source: str, key: str) -> Any:

@@ -201,3 +201,47 @@ def test_reward_sets_load_and_build_an_env(scene):
             assert reward.min() > 0.5, name
     with pytest.raises(UserError):
         apply_reward_set(InteractionEnvCfg(), "no_such_set")
+
+
+ANCHOR_ADDITIVE_TIGHT_AS_A_FULL_COPY = """
+reward_mode: sum
+rewards:
+  root_pos:       {func: root_position_cost,       weight: 44.4, scale: 1.0}
+  root_rot:       {func: root_orientation_cost,    weight: 6.25, scale: 1.0}
+  body_pos:       {func: body_position_cost,       weight: 11.1, scale: 1.0}
+  body_rot:       {func: body_rotation_cost,       weight: 6.25, scale: 0.5}
+  feet_pos:       {func: feet_position_cost,       weight: 44.4, scale: 0.5}
+  joint_pos:      {func: joint_position_cost,      weight: 4.0,  scale: 0.5}
+  hand_pos:       {func: hand_position_cost,       weight: 44.4, scale: 1.0}
+  interaction:    {func: interaction_geometry_cost, weight: 44.4, scale: 1.0, params: {squared: true}}
+  object_pos:     {func: object_position_cost,     weight: 156.0, scale: 1.0, params: {squared: true}}
+  object_rot:     {func: object_rotation_cost,     weight: 6.25, scale: 0.5, params: {squared: true}}
+  energy_links:   {func: link_acceleration_cost,   weight: 2.0e-4, scale: 0.5}
+"""
+
+
+def test_a_reward_set_with_a_base_holds_only_its_changes(tmp_path):
+    """anchor_additive_tight is `base: anchor_additive` plus two weights, and loads exactly as the full copy it
+    replaced; bases nest, a term's fields merge into the base's term, null disables one; a cycle names the file."""
+    from robot_hoi.errors import UserError
+    from robot_hoi.tasks.interaction.env_cfg import load_reward_set
+
+    full = tmp_path / "full.yaml"
+    full.write_text(ANCHOR_ADDITIVE_TIGHT_AS_A_FULL_COPY)
+    assert load_reward_set("anchor_additive_tight") == load_reward_set(str(full))
+    (tmp_path / "mid.yaml").write_text("base: anchor_additive_tight\nrewards:\n  energy_links: null\n"
+                                       "  interaction: {params: {squared: false}}\n")
+    (tmp_path / "leaf.yaml").write_text("base: mid.yaml\nreward_mode: product\nrewards:\n  hand_pos: {scale: 2.0}\n")
+    mode, terms = load_reward_set(str(tmp_path / "leaf.yaml"))
+    _, tight = load_reward_set("anchor_additive_tight")
+    assert mode == "product" and terms["energy_links"] is None
+    assert terms["object_pos"] == tight["object_pos"]  # from two bases up
+    assert terms["interaction"].params == {"squared": False} and terms["interaction"].weight == 44.4
+    assert terms["hand_pos"].scale == 2.0 and terms["hand_pos"].func == "hand_position_cost"
+    (tmp_path / "a.yaml").write_text("base: b.yaml\n")
+    (tmp_path / "b.yaml").write_text("base: a.yaml\nrewards: {}\n")
+    with pytest.raises(UserError, match=r"b\.yaml: base 'a' makes a cycle"):
+        load_reward_set(str(tmp_path / "a.yaml"))
+    (tmp_path / "typo.yaml").write_text("base: anchor_additive\nreward: {}\n")
+    with pytest.raises(UserError, match=r"typo\.yaml: unknown key\(s\) reward"):
+        load_reward_set(str(tmp_path / "typo.yaml"))

@@ -186,24 +186,21 @@ def reward_set_names() -> list[str]:
 
 
 def load_reward_set(name: str) -> tuple[str, dict[str, RewardTermCfg | None]]:
-    """(reward_mode, rewards) of configs/tasks/rewards/<name>.yaml or of a YAML path."""
-    from pathlib import Path
-
-    import yaml
-
+    """(reward_mode, rewards) of configs/tasks/rewards/<name>.yaml or of a YAML path. A set may name another as
+    its `base:` and hold only what differs: a term's fields merge into the base's term, `null` disables it."""
     from robot_hoi.errors import UserError
     from robot_hoi.paths import CONFIGS_DIR
-    from robot_hoi.utils.config import load_dataclass
+    from robot_hoi.utils.config import load_dataclass, merge_dicts, read_yaml_chain
 
-    path = Path(name) if name.endswith((".yaml", ".yml")) else CONFIGS_DIR / "tasks" / "rewards" / f"{name}.yaml"
-    if not path.is_file():
-        raise UserError(f"{path}: no such reward set (choose from {', '.join(reward_set_names())} or a YAML path)")
-    try:
-        data = yaml.safe_load(path.read_text()) or {}
-    except yaml.YAMLError as exc:
-        raise UserError(f"{path}: not valid YAML ({exc})") from None
-    if not isinstance(data, dict) or set(data) - {"reward_mode", "rewards"} or "rewards" not in data:
-        raise UserError(f"{path}: a reward set has the keys reward_mode and rewards only")
+    chain = read_yaml_chain(name, CONFIGS_DIR / "tasks" / "rewards", "reward set", {"reward_mode", "rewards"})
+    data: dict = {}
+    for path, layer in chain:
+        if not isinstance(layer.get("rewards", {}), dict):
+            raise UserError(f"{path}: rewards: expected a mapping of terms")
+        data = merge_dicts(data, layer)
+    path = chain[-1][0]
+    if "rewards" not in data:
+        raise UserError(f"{path}: a reward set needs rewards (its own or its base's)")
     rewards = {k: None if v is None else load_dataclass(RewardTermCfg, v, f"{path} rewards.{k}")
                for k, v in data["rewards"].items()}
     return data.get("reward_mode", "product"), rewards

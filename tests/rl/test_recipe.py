@@ -1,0 +1,129 @@
+"""Recipes (robot_hoi/rl/recipe.py): a run as a file with `base:` inheritance, `robot-hoi train --recipe`, the
+command line on top, the resolved recipe recorded in the run folder."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+import yaml
+
+from robot_hoi.cli import main
+from robot_hoi.errors import UserError
+from robot_hoi.paths import TASK_CONFIG
+from robot_hoi.rl.config import DEFAULT_PPO_CONFIG, FAST_PPO_CONFIG, load_train_config
+from robot_hoi.rl.recipe import RECORD_FILE, load_recipe, recipe_names
+from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg, apply_reward_set
+from robot_hoi.utils.config import load_yaml_dataclass
+
+TINY = ["--eval-episodes", "1", "--set", "runner.progress=false", "--set", "runner.tensorboard=false",
+        "--set", "env.num_envs=4", "--set", "env.nthread=1", "--set", "ppo.horizon=4", "--set", "runner.eval_interval=0",
+        "--set", "model.actor_hidden_dims=[32]", "--set", "model.critic_hidden_dims=[32]"]
+
+
+def _write(folder: Path, name: str, data: dict) -> Path:
+    path = folder / f"{name}.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
+def _configs(recipe):
+    """The task and training configs a recipe gives (without a command line)."""
+    settings = recipe.settings
+    env = load_yaml_dataclass(InteractionEnvCfg, TASK_CONFIG)
+    if settings.get("rewards"):
+        apply_reward_set(env, settings["rewards"])
+    preset = DEFAULT_PPO_CONFIG if settings.get("preset") == "paper" else FAST_PPO_CONFIG
+    return recipe.apply("env", env), recipe.apply("train", load_train_config(preset))
+
+
+def test_every_shipped_recipe_loads_and_applies():
+    """Each configs/recipes/*.yaml names only keys the configs have (a renamed setting fails here)."""
+    names = recipe_names()
+    assert {"lift_place_scratch", "lift_carry", "table_drag", "base_policy", "gpu"} <= set(names)
+    for name in names:
+        _configs(load_recipe(name))
+    table_env, _ = _configs(load_recipe("table_drag"))
+    assert table_env.init.failure_weighted  # from its base
+    assert (table_env.retarget_squeeze_depth, table_env.assist.anneal_samples) == (0.12, 0.6e6)
+    assert table_env.rewards["object_pos"].weight == 156.0  # anchor_additive_tight
+    assert table_env.assist.initial_level == 1.0  # untouched settings keep the task config's
+
+
+def test_bases_nest_and_merge_key_by_key(tmp_path):
+    _write(tmp_path, "a", {"budget": "10m", "env": {"assist": {"anneal_samples": 1.0e6, "initial_level": 0.5}}})
+    _write(tmp_path, "b", {"base": "a.yaml", "budget": "20m", "env": {"assist": {"anneal_samples": 2.0e6}},
+                           "train": {"seed": 4}})
+    leaf = _write(tmp_path, "c", {"base": "b.yaml", "env": {"num_envs": 8}})
+    recipe = load_recipe(str(leaf))
+    assert [p.name for p, _ in recipe.layers] == ["a.yaml", "b.yaml", "c.yaml"]
+    assert recipe.settings == {"budget": "20m", "train": {"seed": 4},
+                               "env": {"assist": {"anneal_samples": 2.0e6, "initial_level": 0.5}, "num_envs": 8}}
+    env, train = _configs(recipe)
+    assert (env.assist.anneal_samples, env.assist.initial_level, env.num_envs, train.seed) == (2.0e6, 0.5, 8, 4)
+
+
+def test_a_base_cycle_is_refused_naming_the_file(tmp_path):
+    _write(tmp_path, "a", {"base": "b.yaml"})
+    _write(tmp_path, "b", {"base": "c.yaml"})
+    _write(tmp_path, "c", {"base": "a.yaml"})
+    with pytest.raises(UserError, match=r"c\.yaml: base 'a' makes a cycle \(a\.yaml -> b\.yaml -> c\.yaml -> a\.yaml\)"):
+        load_recipe(str(tmp_path / "a.yaml"))
+    _write(tmp_path, "self", {"base": "self.yaml"})
+    with pytest.raises(UserError, match="self.yaml: base 'self' makes a cycle"):
+        load_recipe(str(tmp_path / "self.yaml"))
+    with pytest.raises(UserError, match="base 'nope': no such recipe"):
+        load_recipe(str(_write(tmp_path, "d", {"base": "nope"})))
+
+
+def test_unknown_keys_are_refused_naming_the_file_and_the_key(tmp_path):
+    with pytest.raises(UserError, match=r"x\.yaml: unknown key\(s\) budgett"):
+        load_recipe(str(_write(tmp_path, "x", {"budgett": "5m"})))
+    _write(tmp_path, "base", {"env": {"assist": {"anneal_sample": 1.0}}})
+    leaf = _write(tmp_path, "leaf", {"base": "base.yaml", "budget": "5m"})
+    with pytest.raises(UserError, match=r"base\.yaml: unknown key 'env\.assist\.anneal_sample'"):
+        _configs(load_recipe(str(leaf)))  # named in the base, which holds it
+    with pytest.raises(UserError, match=r"t\.yaml: unknown key 'train\.ppo\.lr'"):
+        _configs(load_recipe(str(_write(tmp_path, "t", {"train": {"ppo": {"lr": 1.0}}}))))
+    with pytest.raises(UserError, match=r"g\.yaml: group: 'team' is not one of"):
+        load_recipe(str(_write(tmp_path, "g", {"group": "team"})))
+
+
+class _Stop(Exception):
+    pass
+
+
+def test_command_line_overrides_the_recipe_and_the_run_records_it(tmp_path, monkeypatch):
+    """Flags and --set win over the recipe, the recipe over its base and the task config; the run folder's
+    recipe.yaml holds the result and, trained again, gives the same configs."""
+    jobs = []
+
+    def capture(job, clips):
+        jobs.append(job)
+        raise _Stop
+
+    monkeypatch.setattr("robot_hoi.rl.teacher_job.train_teacher_group", capture)
+    _write(tmp_path, "base", {"budget": "30m", "env": {"assist": {"anneal_samples": 1.0e6, "initial_level": 0.7}},
+                              "train": {"seed": 5, "ppo": {"num_epochs": 3}}})
+    leaf = _write(tmp_path, "leaf", {"base": "base.yaml", "rewards": "anchor_additive_tight", "init": "none",
+                                     "env": {"assist": {"anneal_samples": 2.0e6}}})
+    out = tmp_path / "run"
+    with pytest.raises(_Stop):
+        main(["train", "--recipe", str(leaf), "--budget", "3it", "--set", "seed=7", "--out", str(out), *TINY,
+              "--set", "env.assist.anneal_samples=123", "--set", "ppo.num_epochs=2"])
+    (job,) = jobs
+    env, train = job.env_cfg, job.train_cfg
+    assert env.assist.anneal_samples == 123.0  # --set over the recipe over its base
+    assert env.assist.initial_level == 0.7  # the base's, untouched by the leaf
+    assert env.rewards["root_pos"].weight == 44.4  # the recipe's reward set
+    assert (train.seed, train.ppo.num_epochs) == (7, 2)  # --set over the base's
+    assert job.budget.iterations == 3 and job.init is None  # --budget over 30m; init: none
+    record = yaml.safe_load((out / RECORD_FILE).read_text())
+    assert record["budget"] == "3it" and record["init"] == "none" and record["rewards"] == "anchor_additive_tight"
+    assert record["env"]["assist"] == {"anneal_samples": 123, "initial_level": 0.7}
+    assert record["train"]["seed"] == 7 and "base" not in record
+    again = out / "again"
+    with pytest.raises(_Stop):
+        main(["train", "--recipe", str(out / RECORD_FILE), "--out", str(again)])
+    assert jobs[1].env_cfg == env and jobs[1].train_cfg == train and jobs[1].budget == job.budget
+    assert yaml.safe_load((again / RECORD_FILE).read_text()) == record
