@@ -38,6 +38,12 @@ def register(subparsers) -> None:
                    help=f"a run as a file: a configs/recipes/ name ({', '.join(recipe_names())}) or YAML path "
                         "(robot_hoi/rl/recipe.py); flags and --set given here override it; the run folder records it "
                         f"as {RECORD_FILE}")
+    seeds = p.add_mutually_exclusive_group()
+    seeds.add_argument("--seed", type=int, default=None,
+                       help="the training seed (the training config's seed, as --set seed=N); default: the config's")
+    seeds.add_argument("--seeds", type=int, nargs="+", default=None, metavar="N",
+                       help="train the same run once per seed, one after another, into OUT/seed_<n>/ (each a run "
+                            "folder of its own, --resume continues each); the budget is each seed's")
     p.add_argument("--out", default=None, help="run folder (default: ./runs/<date>-<embodiment> in the current "
                                                "directory)")
     p.add_argument("--preset", default=None, choices=sorted(PRESETS),
@@ -106,8 +112,14 @@ def run(args: argparse.Namespace) -> int:
     from robot_hoi.errors import UserError
 
     _stage_from_data(args)
-    if args.stage == "student" and args.recipe:
-        raise UserError("--recipe trains teachers; the student's settings are --option and --set")
+    if args.stage == "student" and (args.recipe or args.seeds or args.seed is not None):
+        raise UserError("--recipe, --seed and --seeds train teachers; the student's settings are --option and --set")
+    if args.seeds:
+        return _train_seeds(args)
+    if args.seed is not None:
+        if any(o.partition("=")[0].strip() == "seed" for o in args.overrides):
+            raise UserError("--seed and --set seed= both set the seed: give one")
+        args.overrides = [f"seed={args.seed}", *args.overrides]
     if args.backend is not None:
         args.overrides = [*args.overrides, f"env.backend={args.backend}"]
     recipe = _apply_recipe_flags(args)
@@ -123,7 +135,6 @@ def run(args: argparse.Namespace) -> int:
 
         return train_student(args)
     import json
-    import time
     import uuid
 
     import torch
@@ -165,7 +176,7 @@ def run(args: argparse.Namespace) -> int:
         if clip.object is not None:
             print(f"{clip.name}: object {clip.object_name} from {clip.object.origin}")
     groups = factory.group_sources(sources, clips, args.group)
-    out = Path(args.out) if args.out else Path("runs") / f"{time.strftime('%Y%m%d-%H%M%S')}-{embodiment.name}"
+    out = Path(args.out) if args.out else _default_out(embodiment.name)
     print(f"training {len(groups)} teacher(s) on {len(clips)} clip(s) -> {out}")
     flags = {key: getattr(args, key) for key in recipes.FLAGS}
     recipes.write_record(out, recipes.resolved(recipe, flags, args.overrides), recipe)
@@ -215,6 +226,42 @@ def _apply_recipe_flags(args: argparse.Namespace):
         if getattr(args, key) is None:
             setattr(args, key, settings.get(key, defaults.get(key)))
     return recipe
+
+
+def _train_seeds(args: argparse.Namespace) -> int:
+    """`--seeds`: the same run once per seed, one after another, into OUT/seed_<n>/."""
+    import copy
+    from collections import Counter
+
+    from robot_hoi.errors import UserError
+
+    repeated = sorted(s for s, n in Counter(args.seeds).items() if n > 1)
+    if repeated:
+        raise UserError(f"--seeds: seed {', '.join(map(str, repeated))} given more than once")
+    if any(o.partition("=")[0].strip() == "seed" for o in args.overrides):
+        raise UserError("--seeds sets each run's seed: drop --set seed=")
+    if args.out:
+        out = Path(args.out)
+    else:
+        from robot_hoi.embodiment import load_embodiment
+
+        out = _default_out(load_embodiment(args.embodiment).name)
+    codes = {}
+    for k, seed in enumerate(args.seeds, start=1):
+        one = copy.copy(args)
+        one.seeds, one.seed, one.out = None, seed, str(out / f"seed_{seed}")
+        one.overrides = list(args.overrides)
+        print(f"=== seed {seed} ({k} of {len(args.seeds)}) -> {one.out}")
+        codes[seed] = run(one)
+    for seed, code in codes.items():
+        print(f"seed {seed}: {out / f'seed_{seed}'}{'' if code == 0 else f' (failed, exit {code})'}")
+    return max(codes.values())
+
+
+def _default_out(embodiment: str) -> Path:
+    import time
+
+    return Path("runs") / f"{time.strftime('%Y%m%d-%H%M%S')}-{embodiment}"
 
 
 def _split_budget(budget, parts: int):

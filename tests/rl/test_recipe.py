@@ -1,8 +1,9 @@
 """Recipes (robot_hoi/rl/recipe.py): a run as a file with `base:` inheritance, `robot-hoi train --recipe`, the
-command line on top, the resolved recipe recorded in the run folder."""
+command line on top, the resolved recipe recorded in the run folder; `--seeds` trains one run folder per seed."""
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import pytest
@@ -127,3 +128,41 @@ def test_command_line_overrides_the_recipe_and_the_run_records_it(tmp_path, monk
         main(["train", "--recipe", str(out / RECORD_FILE), "--out", str(again)])
     assert jobs[1].env_cfg == env and jobs[1].train_cfg == train and jobs[1].budget == job.budget
     assert yaml.safe_load((again / RECORD_FILE).read_text()) == record
+
+
+@pytest.mark.parametrize("extra, message", [
+    (["--seeds", "1", "2", "--seed", "3"], None),  # argparse: not allowed with
+    (["--seeds", "1", "--set", "seed=2"], "drop --set seed="),
+    (["--seeds", "1", "1"], "seed 1 given more than once"),
+    (["--seed", "1", "--set", "seed=2"], "give one"),
+])
+def test_conflicting_seeds_are_refused(tmp_path, capsys, extra, message):
+    try:
+        code = main(["train", "--out", str(tmp_path / "run"), "--budget", "1it", *extra])
+    except SystemExit as exc:  # argparse's refusal
+        code = exc.code
+    assert code == 2
+    err = capsys.readouterr().err
+    assert (message or "not allowed with argument") in err
+    assert not (tmp_path / "run").exists()
+
+
+@pytest.mark.slow
+def test_seeds_train_one_run_folder_each_and_resume(tmp_path, capsys):
+    """`--seeds 1 2`: two run folders, each with its checkpoint, task.json and the recipe with its seed; `--resume`
+    continues a seed's folder."""
+    out = tmp_path / "runs"
+    assert main(["train", "--recipe", "lift_place_scratch", "--seeds", "1", "2", "--budget", "1it", "--out", str(out),
+                 *TINY]) == 0
+    printed = capsys.readouterr().out
+    for seed in (1, 2):
+        folder = out / f"seed_{seed}"
+        assert f"seed {seed}: {folder}" in printed
+        (group,) = [p for p in folder.iterdir() if p.is_dir()]
+        assert (group / "model_1.pt").is_file() and (group / "task.json").is_file()
+        record = yaml.safe_load((folder / RECORD_FILE).read_text())
+        assert record["train"]["seed"] == seed and record["init"] == "none" and record["budget"] == "1it"
+    assert main(["train", "--recipe", "lift_place_scratch", "--seeds", "1", "--budget", "1it", "--resume",
+                 "--out", str(out), *TINY]) == 0
+    (teacher,) = json.loads((out / "seed_1" / "teachers.json").read_text())["teachers"].values()
+    assert teacher["resumed_from"] == 1 and teacher["iteration"] == 2
