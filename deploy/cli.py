@@ -143,7 +143,7 @@ def handler(args: argparse.Namespace) -> int:
     try:  # after SIGHUP the terminal may be gone; summary.json is already written
         print(f"deploy ({mode}): {options.policy}")
         print(format_summary(summary))
-        print(f"  {'summary':<17} {path}", flush=True)
+        print(f"  {'summary':<17} {path or 'not written (see above)'}", flush=True)
     except OSError:
         pass
     return summary["exit_code"]

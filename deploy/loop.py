@@ -20,6 +20,7 @@ A tick, in order:
 
 from __future__ import annotations
 
+import contextlib
 import sys
 from dataclasses import dataclass
 
@@ -133,6 +134,8 @@ class Runtime:
         self.ticks = 0
         self._last_measured_q = np.zeros(self.num_body)
         self._clamp_state = (frozenset(), frozenset())
+        self._sync_logs = False
+        self.status_errors = 0  # status lines that could not be written (terminal gone): dropped
 
     # ------------------------------------------------------------------ stop and start hooks (thread / signal safe)
     def request_start(self) -> None:
@@ -168,6 +171,7 @@ class Runtime:
         self.phase = phase
         self.phase_since = now
         self._confirmed = False  # a confirmation is for one gate only
+        self._sync_logs = True  # made durable once this tick's commands are out
         self.events.log("phase", tick=self.ticks, **{"from": previous.name, "to": phase.name}, reason=reason)
         if self.prompt:
             self.events.log("prompt", tick=self.ticks, phase=phase.name, message=self.prompt)
@@ -411,10 +415,27 @@ class Runtime:
 
     # ------------------------------------------------------------------ recording
     def _finish_tick(self, now, deadline, body, reading, poses, action, command, hand_units, keep_going=False):
+        """After the tick's commands are out: record it, and hand the logs to their writers (fsynced when the
+        phase changed)."""
         self.recorder.record(tick_row(now, deadline, self.phase, self.policy_tick, body, reading, poses, action,
                                       command, hand_units, self.num_body, self.contract.num_actions))
         self.ticks += 1
+        if self._sync_logs:
+            self._sync_logs = False
+            self.events.sync()
+            self.recorder.sync()
+        else:
+            self.events.flush_due()
         return keep_going
+
+    def _show_status(self) -> None:
+        """Redraw the operator's status; a terminal that is gone (EIO after SIGHUP) costs the line, nothing else."""
+        if self.status is None:
+            return
+        try:
+            self.status.update(self)
+        except Exception:
+            self.status_errors += 1
 
     # ------------------------------------------------------------------ the loop
     def run(self, duration_s: float | None = None) -> dict:
@@ -438,8 +459,7 @@ class Runtime:
                 keep_going = self.tick(deadline)
                 done = clock.now()
                 self.timing.record(wake, deadline, done)
-                if self.status is not None:
-                    self.status.update(self)
+                self._show_status()
                 if not keep_going or (self.exit_reason and self.phase == Phase.WAIT_STATE):
                     break
                 deadline += self.dt
@@ -447,11 +467,7 @@ class Runtime:
                     deadline += self._overrun(done, deadline) * self.dt
                 clock.sleep_until(deadline)
         except BaseException as exc:
-            self.events.log("error", tick=self.ticks, reason=f"runtime crashed: {type(exc).__name__}: {exc}")
-            try:
-                self._send_damping(None)
-            finally:
-                self.exit_reason = self.exit_reason or f"crashed: {type(exc).__name__}: {exc}"
+            self._crash_damping(exc)
             raise
         finally:
             sys.setswitchinterval(previous_interval)
@@ -459,9 +475,23 @@ class Runtime:
             end = clock.now()
             self.phase_time[self.phase.name] = self.phase_time.get(self.phase.name, 0.0) + (end - self.phase_since)
             self.phase_since = end
-            self.events.log("stop", reason=self.exit_reason or self.stops.reason or "", ticks=self.ticks,
-                            final_phase=self.phase.name, outcome=self.outcome.name)
+            with contextlib.suppress(Exception):  # the robot is damped; what is left is paperwork
+                self.events.log("stop", reason=self.exit_reason or self.stops.reason or "", ticks=self.ticks,
+                                final_phase=self.phase.name, outcome=self.outcome.name)
+                self.events.sync(wait_s=2.0)
+                self.recorder.sync(wait_s=2.0)
         return self.summary()
+
+    def _crash_damping(self, exc: BaseException) -> None:
+        """The loop broke: damping goes out first, then the record of why."""
+        try:
+            self._send_damping(None)
+        except Exception as send_exc:
+            self.body_send_errors += 1
+            exc.add_note(f"the damping command could not be sent either: {send_exc}")
+        self.exit_reason = self.exit_reason or f"crashed: {type(exc).__name__}: {exc}"
+        with contextlib.suppress(Exception):
+            self.events.log("error", tick=self.ticks, reason=f"runtime crashed: {type(exc).__name__}: {exc}")
 
     def _overrun(self, done: float, next_deadline: float) -> int:
         """Count it, log it, fault on too many; returns the deadlines to skip."""
@@ -503,6 +533,8 @@ class Runtime:
             "clamped_ticks": self.shaper.clamped_ticks,
             "rate_limited_ticks": self.shaper.rate_limited_ticks,
             "body_send_errors": self.body_send_errors,
+            "logs": {"events": self.events.report(), "ticks": self.recorder.report(),
+                     "status_errors": self.status_errors},
             "hands": hands,
         }
 

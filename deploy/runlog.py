@@ -1,8 +1,14 @@
-"""Run logs: decisions as JSON lines (written as they happen) and per-tick records in npz chunks.
+"""Run logs: decisions as JSON lines and per-tick records in npz chunks, written by background threads.
 
     LOG_DIR/events.jsonl         one JSON object per decision: phase changes, faults, clamps, operator, overruns
-    LOG_DIR/ticks/chunk_NNNNN.npz every command and state, per-tick timing (written by a background thread)
+    LOG_DIR/ticks/chunk_NNNNN.npz every command and state, per-tick timing
     LOG_DIR/summary.json         written by the CLI at the end
+
+The control loop never waits for the disk and never sees a write error: it hands lines and tick rows to a writer
+thread, which writes them at most a second after they happened (sooner at `sync()`: the runtime calls it after
+the commands of a tick that changed phase are out, and at the end; those writes are fsynced). A write that fails
+(disk full, disk gone) is counted with what it lost and the last error; `report()` says so for summary.json. The
+in-memory events stay complete either way.
 
 `load_ticks(LOG_DIR)` concatenates the chunks back into one dict of arrays.
 """
@@ -12,8 +18,10 @@ from __future__ import annotations
 import io
 import json
 import logging
+import os
 import queue
 import threading
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -22,6 +30,8 @@ from deploy.atomic import atomic_write_bytes
 from deploy.clock import Clock
 
 log = logging.getLogger("deploy.runtime")
+
+FLUSH_EVERY_S = 1.0  # longest a record stays only in memory (unless the writer is stuck on the disk)
 
 
 def _jsonable(value):
@@ -32,89 +42,222 @@ def _jsonable(value):
     return str(value)
 
 
+class _Writer:
+    """A thread that runs write jobs in order. A failed job is counted with the records it carried; nothing is
+    raised to the thread that submitted it."""
+
+    def __init__(self, name: str):
+        self.errors = 0
+        self.lost = 0
+        self.last_error: str | None = None
+        self._queue: queue.Queue = queue.Queue()
+        self._thread = threading.Thread(target=self._run, name=name, daemon=True)
+        self._thread.start()
+
+    def submit(self, job: Callable[[], None], records: int) -> None:
+        self._queue.put((job, records))
+
+    def _run(self) -> None:
+        while True:
+            item = self._queue.get()
+            try:
+                if item is None:
+                    return
+                job, records = item
+                try:
+                    job()
+                except Exception as exc:  # disk full, disk gone, permissions: count it, keep going
+                    self.errors += 1
+                    self.lost += records
+                    self.last_error = str(exc)
+            finally:
+                self._queue.task_done()
+
+    def wait_idle(self, timeout_s: float) -> bool:
+        """Wait up to timeout_s for the submitted jobs (False: the disk is still busy with them)."""
+        done = threading.Event()
+        self._queue.put((done.set, 0))
+        return done.wait(timeout_s)
+
+    def close(self, timeout_s: float) -> None:
+        self._queue.put(None)
+        self._thread.join(timeout_s)
+
+    def report(self) -> dict:
+        return {"errors": self.errors, "lost": self.lost, "last_error": self.last_error}
+
+
+NO_WRITES = {"errors": 0, "lost": 0, "last_error": None}
+
+
 class EventLog:
     """Structured decision log: kept in memory (for the summary and tests) and appended to events.jsonl."""
 
-    def __init__(self, clock: Clock, path: str | Path | None = None, max_in_memory: int = 10000):
+    def __init__(self, clock: Clock, path: str | Path | None = None, max_in_memory: int = 10000,
+                 flush_every_s: float = FLUSH_EVERY_S):
         self.clock = clock
         self.events: list[dict] = []
         self.max_in_memory = max_in_memory
         self.dropped = 0
+        self.flush_every_s = flush_every_s
         self._file = None
+        self._writer: _Writer | None = None
+        self._pending: list[str] = []
+        self._last_flush = float("-inf")
         if path is not None:
             Path(path).parent.mkdir(parents=True, exist_ok=True)
-            self._file = open(path, "a", buffering=1)  # line-buffered: each decision is on disk at once
+            self._file = open(path, "a")  # opened here: an unwritable log dir fails at start-up, not mid-run
+            self._writer = _Writer("event-writer")
+        self._written = self._writer  # kept after close() for report()
 
     def log(self, event: str, **fields) -> dict:
-        record = {"t": self.clock.now(), "event": event, **fields}
+        """Record a decision; never raises (the loop calls this between a fault and its damping command)."""
+        now = self.clock.now()
+        record = {"t": now, "event": event, **fields}
         if len(self.events) < self.max_in_memory:
             self.events.append(record)
         else:
             self.dropped += 1
-        if self._file is not None:
-            self._file.write(json.dumps(record, default=_jsonable) + "\n")
+        if self._writer is not None:
+            try:
+                line = json.dumps(record, default=_jsonable)
+            except (TypeError, ValueError):  # e.g. a value that contains itself: keep what it was
+                line = json.dumps({"t": now, "event": event, "fields": repr(fields)})
+            self._pending.append(line + "\n")
         level = logging.WARNING if event in ("fault", "overrun", "error") else logging.INFO
         log.log(level, "%s %s", event, {k: v for k, v in fields.items()})
         return record
 
+    def flush_due(self) -> None:
+        """Hand the pending lines to the writer if the last hand-over is flush_every_s old (the loop calls this
+        once a tick, after its commands are out)."""
+        now = self.clock.now()
+        if self._writer is not None and self._pending and now - self._last_flush >= self.flush_every_s:
+            self._submit(sync=False, now=now)
+
+    def _submit(self, sync: bool, now: float) -> None:
+        self._last_flush = now
+        lines, self._pending = self._pending, []
+        if lines or sync:
+            self._writer.submit(lambda: self._write(lines, sync), len(lines))
+
+    def _write(self, lines: list[str], sync: bool) -> None:
+        try:
+            self._file.write("".join(lines))
+            self._file.flush()
+        except BaseException:
+            self._reopen()
+            raise
+        if sync:
+            os.fsync(self._file.fileno())
+
+    def _reopen(self) -> None:
+        """After a failed write: drop what is stuck in the file's buffer (counted as lost) and start afresh."""
+        name = getattr(self._file, "name", None)
+        try:
+            self._file.close()
+        except (OSError, ValueError):
+            pass
+        if isinstance(name, str):
+            try:
+                self._file = open(name, "a")
+            except OSError:
+                pass
+
+    def sync(self, wait_s: float | None = None) -> None:
+        """Hand everything pending to the writer, to be written and fsynced; wait up to wait_s for it."""
+        if self._writer is None:
+            return
+        self._submit(sync=True, now=self.clock.now())
+        if wait_s is not None:
+            self._writer.wait_idle(wait_s)
+
+    def wait_idle(self, timeout_s: float) -> bool:
+        return True if self._writer is None else self._writer.wait_idle(timeout_s)
+
+    def report(self) -> dict:
+        """Failed writes, events they lost and the last error (summary.json 'logs')."""
+        return NO_WRITES.copy() if self._written is None else self._written.report()
+
     def of_kind(self, event: str) -> list[dict]:
         return [e for e in self.events if e["event"] == event]
 
-    def close(self) -> None:
-        if self._file is not None:
+    def close(self, timeout_s: float = 5.0) -> None:
+        if self._writer is None:
+            return
+        self.sync()
+        self._writer.close(timeout_s)
+        try:
             self._file.close()
-            self._file = None
+        except OSError as exc:
+            log.warning("events.jsonl: %s", exc)
+        self._writer = None
 
 
 class TickRecorder:
-    """Collects per-tick arrays; every `chunk_ticks` ticks a background thread writes one npz chunk."""
+    """Collects per-tick arrays; a background thread writes them as npz chunks of up to `chunk_ticks` ticks, at
+    least every `flush_every_s` seconds of run time, and at sync() (fsynced)."""
 
-    def __init__(self, folder: str | Path | None, chunk_ticks: int = 1024):
+    def __init__(self, folder: str | Path | None, chunk_ticks: int = 1024, flush_every_s: float = FLUSH_EVERY_S):
         self.folder = Path(folder) / "ticks" if folder is not None else None
         self.chunk_ticks = chunk_ticks
+        self.flush_every_s = flush_every_s
         self._rows: list[dict[str, np.ndarray]] = []
         self._chunks_written = 0
+        self._first_t: float | None = None
         self.ticks = 0
-        self._queue: queue.Queue = queue.Queue()
-        self._thread = None
+        self._writer: _Writer | None = None
         if self.folder is not None:
             self.folder.mkdir(parents=True, exist_ok=True)
-            self._thread = threading.Thread(target=self._writer, name="tick-writer", daemon=True)
-            self._thread.start()
+            self._writer = _Writer("tick-writer")
+        self._written = self._writer  # kept after close() for report()
 
     def record(self, row: dict[str, np.ndarray | float | int]) -> None:
         self.ticks += 1
         if self.folder is None:
             return
         self._rows.append(row)
-        if len(self._rows) >= self.chunk_ticks:
-            self._flush()
+        t = float(row["t"])
+        self._first_t = t if self._first_t is None else self._first_t
+        if len(self._rows) >= self.chunk_ticks or t - self._first_t >= self.flush_every_s:
+            self._flush(sync=False)
 
-    def _flush(self) -> None:
+    def _flush(self, sync: bool) -> None:
         if not self._rows:
             return
-        rows, self._rows = self._rows, []
-        self._queue.put((self._chunks_written, rows))
+        rows, self._rows, self._first_t = self._rows, [], None
+        path = self.folder / f"chunk_{self._chunks_written:05d}.npz"
         self._chunks_written += 1
+        self._writer.submit(lambda: self._write(path, rows, sync), len(rows))
 
-    def _writer(self) -> None:
-        while True:
-            item = self._queue.get()
-            if item is None:
-                return
-            index, rows = item
-            arrays = {key: np.stack([np.asarray(r[key]) for r in rows]) for key in rows[0]}
-            buffer = io.BytesIO()
-            np.savez(buffer, **arrays)
-            atomic_write_bytes(self.folder / f"chunk_{index:05d}.npz", buffer.getvalue())
+    @staticmethod
+    def _write(path: Path, rows: list[dict], sync: bool) -> None:
+        arrays = {key: np.stack([np.asarray(r[key]) for r in rows]) for key in rows[0]}
+        buffer = io.BytesIO()
+        np.savez(buffer, **arrays)
+        atomic_write_bytes(path, buffer.getvalue(), fsync=sync)
 
-    def close(self) -> None:
-        if self._thread is None:
+    def sync(self, wait_s: float | None = None) -> None:
+        """Write the rows held so far as a chunk (fsynced); wait up to wait_s for the disk."""
+        if self._writer is None:
             return
-        self._flush()
-        self._queue.put(None)
-        self._thread.join()
-        self._thread = None
+        self._flush(sync=True)
+        if wait_s is not None:
+            self._writer.wait_idle(wait_s)
+
+    def wait_idle(self, timeout_s: float) -> bool:
+        return True if self._writer is None else self._writer.wait_idle(timeout_s)
+
+    def report(self) -> dict:
+        """Failed chunk writes, ticks they lost and the last error (summary.json 'logs')."""
+        return NO_WRITES.copy() if self._written is None else self._written.report()
+
+    def close(self, timeout_s: float = 10.0) -> None:
+        if self._writer is None:
+            return
+        self._flush(sync=True)
+        self._writer.close(timeout_s)
+        self._writer = None
 
 
 def tick_row(now, deadline, phase, policy_tick, body, reading, poses, action, command, hand_units, num_body,

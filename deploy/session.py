@@ -14,6 +14,8 @@ import contextlib
 import json
 import logging
 import math
+import sys
+import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -106,9 +108,7 @@ class Session(contextlib.ExitStack):
         check_against_embodiment(contract, embodiment_path)
         motion = self._motion(contract)
         rate = self._rate(contract)
-        log_dir = Path(o.log_dir) if o.log_dir else Path("runs") / "deploy" / time.strftime("%Y%m%d-%H%M%S")
-        log_dir.mkdir(parents=True, exist_ok=True)
-        self.log_dir = log_dir
+        self.log_dir = log_dir = self._log_dir()
 
         body = self._body(contract)
         tracker = self._tracker(motion)
@@ -116,10 +116,13 @@ class Session(contextlib.ExitStack):
             body.imu_quat_source = tracker.true_robot_quat_wxyz  # one simulated world: IMU agrees with mocap
         hands = self._hands(contract, real_hand_ports, hand_ids, rate)
 
-        events = EventLog(self.clock, log_dir / "events.jsonl")
-        self.callback(events.close)
-        recorder = TickRecorder(log_dir)
-        self.callback(recorder.close)
+        try:
+            events = EventLog(self.clock, log_dir / "events.jsonl")
+            self.callback(events.close)
+            recorder = TickRecorder(log_dir)
+            self.callback(recorder.close)
+        except OSError as exc:
+            raise DeployError(f"--log-dir {log_dir}: not writable ({exc.strerror or exc})") from None
         safety = o.safety
         if auto_start and safety.auto_start_after_s is None:
             safety.auto_start_after_s = 0.5
@@ -132,6 +135,18 @@ class Session(contextlib.ExitStack):
                                expected_mode_machine=load_embodiment(embodiment_path).mode_machine, status=status)
         events.log("session", **self.description, log_dir=str(log_dir))
         events.log("hand_budget", every_n_ticks=hands.every_n_ticks, message=self.description["hand_budget"])
+
+    def _log_dir(self) -> Path:
+        """The run's log folder, created and proven writable before anything is opened (a usage error if not)."""
+        o = self.options
+        log_dir = Path(o.log_dir) if o.log_dir else Path("runs") / "deploy" / time.strftime("%Y%m%d-%H%M%S")
+        try:
+            log_dir.mkdir(parents=True, exist_ok=True)
+            with tempfile.TemporaryFile(dir=log_dir):
+                pass
+        except OSError as exc:
+            raise DeployError(f"--log-dir {log_dir}: not writable ({exc.strerror or exc})") from None
+        return log_dir
 
     def _check_auto_start(self) -> bool:
         """--auto-start is for simulated bodies; a DDS body this process did not simulate must be named."""
@@ -299,9 +314,16 @@ class Session(contextlib.ExitStack):
                         "log_dir": str(self.log_dir), "setup": dict(self.description)})
         return summary
 
-    def write_summary(self, summary: dict) -> Path:
+    def write_summary(self, summary: dict) -> Path | None:
+        """summary.json, fsynced; None (and one line on stderr) when the disk refuses it: the run is over, so a
+        failed write must not turn its exit code into a crash."""
         path = self.log_dir / "summary.json"
-        atomic_write_text(path, json.dumps(summary, indent=2, default=str) + "\n")
+        try:
+            atomic_write_text(path, json.dumps(summary, indent=2, default=str) + "\n", fsync=True)
+        except OSError as exc:
+            with contextlib.suppress(OSError):
+                print(f"deploy: {path}: summary.json not written ({exc})", file=sys.stderr, flush=True)
+            return None
         return path
 
 

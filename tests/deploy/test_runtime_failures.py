@@ -1,0 +1,169 @@
+"""When the runtime itself fails, on the fake clock with the simulated body and hands: a full log disk, a dead
+terminal, a refused start, a stall, a widened policy file, a fumbled remote, lost hand replies. In each the last
+command is a damping command (or nothing stiff where no policy ran) and the outcome is the documented one."""
+
+from __future__ import annotations
+
+import errno
+import io
+import os
+
+import numpy as np
+import pytest
+
+from deploy.runlog import EventLog, TickRecorder, load_events, load_ticks
+from deploy.safety import Phase, SafetyConfig
+
+from .conftest import RuntimeRig
+
+FAST = dict(zero_torque_s=0.1, ramp_s=0.3, auto_start_after_s=0.1, damp_s=0.2)
+
+
+def damping_commands(rig) -> list[dict]:
+    """The trailing run of damping commands (kp 0, kd damp_kd) the body received."""
+    out = []
+    for command in reversed(rig.body.commands):
+        if not (np.all(command["kp"] == 0) and np.all(command["kd"] == rig.safety.damp_kd)):
+            break
+        out.append(command)
+    return out
+
+
+def assert_ends_damped(rig, summary, outcome: str, code: int):
+    assert summary["outcome"] == outcome and summary["exit_code"] == code, summary["exit_reason"]
+    assert summary["final_phase"] == "DAMP"
+    assert len(damping_commands(rig)) >= round(rig.safety.damp_s / rig.dt) - 1, "damped for damp_s"
+
+
+class FullDisk(io.TextIOBase):
+    """A file on a disk that filled up: every write raises ENOSPC."""
+
+    def write(self, text):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    def flush(self):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+
+class AfterSteps:
+    """Wraps the policy: after `n` steps, run `action` once (a fault arriving mid-run)."""
+
+    def __init__(self, inner, n: int, action):
+        self.inner, self.n, self.action, self.calls = inner, n, action, 0
+
+    def __call__(self, obs):
+        self.calls += 1
+        if self.calls == self.n:
+            self.action()
+        return self.inner(obs)
+
+
+# ------------------------------------------------------------------ 1. logging never stands between a fault and damping
+def test_disk_full_during_policy_still_damps_and_reports_what_was_lost(dev_policy, tmp_path, monkeypatch):
+    rig = RuntimeRig(dev_policy, log_dir=tmp_path, safety=SafetyConfig(**FAST))
+
+    def disk_fills_and_a_hand_faults():
+        rig.events._file = FullDisk()
+        monkeypatch.setattr("deploy.runlog.atomic_write_bytes", FullDisk().write)
+        rig.right.error_bits[1] = 1  # locked rotor: a fault that must damp while nothing can be logged
+
+    rig.runtime.policy = AfterSteps(rig.policy, 20, disk_fills_and_a_hand_faults)
+    summary = rig.runtime.run(duration_s=10.0)
+    assert_ends_damped(rig, summary, "FAULT", 1)
+    assert "right hand fault" in summary["faults"][0]
+    logs = summary["logs"]
+    assert logs["events"]["errors"] > 0 and logs["events"]["lost"] > 0
+    assert "No space left on device" in logs["events"]["last_error"]
+    assert logs["ticks"]["errors"] > 0 and logs["ticks"]["lost"] > 0
+    assert len(rig.events.of_kind("fault")) == 1  # still kept in memory for the summary
+
+
+def test_crash_sends_damping_before_anything_is_logged(dev_policy, tmp_path):
+    rig = RuntimeRig(dev_policy, log_dir=tmp_path, safety=SafetyConfig(**FAST))
+
+    def disk_full_then_a_bug():
+        rig.events._file = FullDisk()
+        rig.events.log = lambda *a, **k: (_ for _ in ()).throw(OSError(errno.ENOSPC, "No space left on device"))
+        raise ZeroDivisionError("a bug in the loop")
+
+    rig.runtime.policy = AfterSteps(rig.policy, 10, disk_full_then_a_bug)
+    with pytest.raises(ZeroDivisionError):
+        rig.runtime.run(duration_s=10.0)
+    last = rig.body.commands[-1]
+    assert np.all(last["kp"] == 0) and np.all(last["kd"] == rig.safety.damp_kd)
+    assert rig.runtime.exit_reason.startswith("crashed: ZeroDivisionError")
+
+
+def test_tick_writer_survives_a_failed_write_and_says_what_it_lost(tmp_path, monkeypatch):
+    from deploy import runlog
+
+    recorder = TickRecorder(tmp_path, chunk_ticks=10)
+    real = runlog.atomic_write_bytes
+    calls = {"n": 0}
+
+    def first_write_fails(path, data, **kwargs):
+        calls["n"] += 1
+        if calls["n"] == 1:
+            raise OSError(errno.ENOSPC, "No space left on device")
+        real(path, data, **kwargs)
+
+    monkeypatch.setattr(runlog, "atomic_write_bytes", first_write_fails)
+    for i in range(30):
+        recorder.record({"t": float(i) * 0.01, "x": np.array([i])})
+    recorder.close()
+    assert recorder.report() == {"errors": 1, "lost": 10, "last_error": "[Errno 28] No space left on device"}
+    assert load_ticks(tmp_path)["x"][:, 0].tolist() == list(range(10, 30))
+
+
+def test_logs_reach_the_disk_every_second_and_are_synced_at_phase_changes(dev_policy, tmp_path, monkeypatch):
+    synced = []
+    real_fsync = os.fsync
+    monkeypatch.setattr(os, "fsync", lambda fd: (synced.append(fd), real_fsync(fd))[1])
+    rig = RuntimeRig(dev_policy, log_dir=tmp_path, safety=SafetyConfig(**FAST))
+    rig.run_until(Phase.POLICY)
+    rig.step(int(1.5 / rig.dt))
+    rig.events.wait_idle(5.0)
+    rig.recorder.wait_idle(5.0)
+    ticks = load_ticks(tmp_path)
+    assert len(ticks["t"]) >= rig.runtime.ticks - int(1.0 / rig.dt) - 1  # at most a second only in memory
+    on_disk = [e["event"] for e in load_events(tmp_path)]
+    assert on_disk.count("phase") == 4  # ZERO_TORQUE, RAMP_TO_DEFAULT, HOLD, POLICY: each synced as it happened
+    assert len(synced) >= 2 * 4  # events and ticks at each phase change
+
+
+def test_event_log_never_raises_into_the_loop(tmp_path):
+    from deploy.clock import FakeClock
+
+    events = EventLog(FakeClock(), tmp_path / "events.jsonl")
+    events._file = FullDisk()
+    events.log("fault", reason="x")
+    events.sync()
+    events.close()
+    assert events.report()["errors"] >= 1 and events.report()["lost"] == 1
+    assert events.of_kind("fault")[0]["reason"] == "x"
+
+
+def test_unwritable_log_dir_is_a_usage_error_at_start(dev_policy, tmp_path, capsys):
+    from deploy.cli import main
+
+    blocker = tmp_path / "a_file"
+    blocker.write_text("")
+    code = main(["--dry-run", "--policy", str(dev_policy), "--log-dir", str(blocker / "logs"), "--auto-start"])
+    err = capsys.readouterr().err
+    assert code == 2 and "--log-dir" in err and "not writable" in err and "Traceback" not in err, err
+
+
+def test_summary_write_failure_is_one_line_not_a_crash(dev_policy, tmp_path, capsys, monkeypatch):
+    from deploy import session
+
+    monkeypatch.setattr(session, "atomic_write_text",
+                        lambda *a, **k: (_ for _ in ()).throw(OSError(errno.ENOSPC, "No space left on device")))
+    from deploy.cli import main
+
+    code = main(["--dry-run", "--policy", str(dev_policy), "--log-dir", str(tmp_path), "--duration", "1.5",
+                 "--zero-torque-s", "0.1", "--ramp-s", "0.3", "--damp-s", "0.2", "--auto-start",
+                 "--max-input-age-periods", "10", "--hand-timeout", "0.1", "--max-overruns", "1000",
+                 "--min-hand-rate-share", "0.2", "--status", "off"])
+    err = capsys.readouterr().err
+    assert code == 0 and "summary.json not written" in err and "Traceback" not in err, err
+    assert not (tmp_path / "summary.json").exists()
