@@ -122,7 +122,7 @@ class Runtime:
         self._policy_deadline0 = 0.0
         self._ramp_from: np.ndarray | None = None
         self._confirmed = False  # the operator confirmed the gate the runtime is waiting at
-        self._start_refusal: str | None = None
+        self.start_refusal: str | None = None  # why the last start in HOLD was refused (on the status line)
         self.stops = StopRequests()
         self.exit_reason = ""
         self.fault_reasons: list[str] = []
@@ -171,6 +171,7 @@ class Runtime:
         self.phase = phase
         self.phase_since = now
         self._confirmed = False  # a confirmation is for one gate only
+        self.start_refusal = None
         self._sync_logs = True  # made durable once this tick's commands are out
         self.events.log("phase", tick=self.ticks, **{"from": previous.name, "to": phase.name}, reason=reason)
         if self.prompt:
@@ -311,9 +312,10 @@ class Runtime:
             if self.needs_tracker else []
         if problems:
             reason = "; ".join(problems)
-            if reason != self._start_refusal:
+            if self._confirmed or reason != self.start_refusal:  # every refused press; auto start: changes only
                 self.events.log("start_refused", tick=self.ticks, reason=reason)
-                self._start_refusal = reason
+            self.start_refusal = reason
+            self._confirmed = False  # refused: the operator presses again when the inputs are back
             return False
         return True
 

@@ -14,6 +14,7 @@ import contextlib
 import json
 import logging
 import math
+import socket
 import sys
 import tempfile
 import time
@@ -149,12 +150,17 @@ class Session(contextlib.ExitStack):
         return log_dir
 
     def _check_auto_start(self) -> bool:
-        """--auto-start is for simulated bodies; a DDS body this process did not simulate must be named."""
+        """--auto-start is for simulated bodies; a DDS body this process did not simulate must be a simulator on
+        this machine: its interface must be a loopback interface (a robot is never reached over one)."""
         o = self.options
         if o.auto_start_on is not None:
             if o.dry_run or (o.body or "dds") != "dds" or o.dds_interface != o.auto_start_on:
                 raise DeployError(f"--auto-start-on {o.auto_start_on} is for a DDS simulator on that interface: "
                                   f"give --dds-interface {o.auto_start_on} without --dry-run")
+            if not is_loopback_interface(o.auto_start_on):
+                raise DeployError(f"--auto-start-on {o.auto_start_on}: {o.auto_start_on} is not a loopback interface; "
+                                  "automatic start is only for a simulator on this machine (on a robot's "
+                                  "interface the operator confirms)")
             return True
         if o.auto_start and not o.dry_run:
             raise DeployError("--auto-start is only for dry runs and simulation: on a real body the operator "
@@ -325,6 +331,19 @@ class Session(contextlib.ExitStack):
                 print(f"deploy: {path}: summary.json not written ({exc})", file=sys.stderr, flush=True)
             return None
         return path
+
+
+IFF_LOOPBACK = 0x8  # linux/if.h
+
+
+def is_loopback_interface(name: str) -> bool:
+    """Whether `name` is one of this machine's loopback interfaces (Linux: its IFF_LOOPBACK flag; elsewhere lo/lo0)."""
+    if name not in {n for _, n in socket.if_nameindex()}:
+        return False
+    try:
+        return bool(int((Path("/sys/class/net") / name / "flags").read_text(), 16) & IFF_LOOPBACK)
+    except (OSError, ValueError):
+        return name in ("lo", "lo0")
 
 
 def _line_rate(bus) -> float:

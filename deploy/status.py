@@ -20,8 +20,9 @@ def status_text(runtime) -> str:
     rates = runtime.hands.command_rates(1.0)
     hands = " ".join(f"{side[0].upper()} {rate:.1f}" for side, rate in rates.items())
     faults = "; ".join(runtime.fault_reasons) or "none"
+    refused = f" | start refused: {runtime.start_refusal}" if runtime.start_refusal else ""
     return (f"{runtime.phase.name} {now - runtime.phase_since:.1f} s | loop {1 / runtime.dt:.0f} Hz, late p99 {late}, "
-            f"overruns {runtime.timing.overruns} | hands {hands} Hz | faults {faults}")
+            f"overruns {runtime.timing.overruns} | hands {hands} Hz | faults {faults}{refused}")
 
 
 class NullStatus:
@@ -41,7 +42,7 @@ class PlainStatus(NullStatus):
 
     def update(self, runtime) -> None:
         now = runtime.clock.now()
-        key = (runtime.phase, runtime.prompt, len(runtime.fault_reasons))
+        key = (runtime.phase, runtime.prompt, len(runtime.fault_reasons), runtime.start_refusal)
         if key == self._key and now - self._last < self.plain_every_s:
             return
         if runtime.prompt and key != self._key:

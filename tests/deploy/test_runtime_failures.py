@@ -167,3 +167,46 @@ def test_summary_write_failure_is_one_line_not_a_crash(dev_policy, tmp_path, cap
     err = capsys.readouterr().err
     assert code == 0 and "summary.json not written" in err and "Traceback" not in err, err
     assert not (tmp_path / "summary.json").exists()
+
+
+# ------------------------------------------------------------------ 2. a start is one fresh press while every input is usable
+def test_refused_start_disarms_and_says_why(dev_policy):
+    from deploy.operator import ScriptedOperator
+    from deploy.status import status_text
+
+    rig = RuntimeRig(dev_policy, safety=SafetyConfig(**{**FAST, "auto_start_after_s": None}))
+    rig.runtime.operator = ScriptedOperator(rig.clock, [(rig.clock.now() + 0.3, "start")])  # stiffen
+    rig.run_until(Phase.HOLD)
+    rig.tracker.drop("object")
+    rig.step(3)  # stale now
+    rig.runtime.operator = ScriptedOperator(rig.clock, [(rig.clock.now(), "start")])
+    rig.step(3)
+    assert rig.runtime.phase == Phase.HOLD
+    assert "object pose stale" in rig.events.of_kind("start_refused")[0]["reason"]
+    assert "start refused: object pose stale" in status_text(rig.runtime)
+    assert rig.runtime.prompt is not None  # asked again
+    rig.tracker.restore("object")
+    rig.step(30)
+    assert rig.runtime.phase == Phase.HOLD, "a refused press must not fire later by itself"
+    rig.runtime.operator = ScriptedOperator(rig.clock, [(rig.clock.now(), "start")])
+    rig.step(2)
+    assert rig.runtime.phase == Phase.POLICY
+    assert rig.events.of_kind("phase")[-1]["reason"] == "operator start"
+    assert "start refused" not in status_text(rig.runtime)
+
+
+# ------------------------------------------------------------------ 3. automatic start only against a simulator
+def test_auto_start_on_a_robot_interface_is_refused(dev_policy, tmp_path, capsys):
+    from deploy.cli import main
+
+    code = main(["--policy", str(dev_policy), "--log-dir", str(tmp_path), "--auto-start-on", "eth0",
+                 "--dds-interface", "eth0", "--hand-port", "/dev/a", "/dev/b"])
+    err = capsys.readouterr().err
+    assert code == 2 and "eth0 is not a loopback interface" in err and err.count("\n") == 1, err
+
+
+def test_only_loopback_interfaces_count_as_a_simulator():
+    from deploy.session import is_loopback_interface
+
+    assert is_loopback_interface("lo")
+    assert not is_loopback_interface("eth0") and not is_loopback_interface("no-such-if0")
