@@ -92,11 +92,11 @@ def lift_hold(substeps: int, clip) -> dict:
     from robot_hoi.embodiment import load_embodiment
     from robot_hoi.rl.cli import TASK_CONFIG
     from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg
-    from robot_hoi.tasks.interaction.feasibility import hold_test
+    from robot_hoi.tasks.interaction.feasibility import physics_gate
     from robot_hoi.utils.config import load_yaml_dataclass
 
     embodiment = load_embodiment("g1_inspire", [f"decimation={substeps}"])
-    return hold_test(clip, load_yaml_dataclass(InteractionEnvCfg, TASK_CONFIG), embodiment)
+    return physics_gate(clip, load_yaml_dataclass(InteractionEnvCfg, TASK_CONFIG), embodiment)
 
 
 def checkpoint_eval(substeps: int, checkpoint: str, episodes: int) -> dict:

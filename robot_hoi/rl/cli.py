@@ -57,6 +57,9 @@ def register(subparsers) -> None:
     p.add_argument("--set", dest="overrides", action="append", default=[],
                    help="override, e.g. --set env.num_envs=128 --set ppo.actor_lr=1e-4 (repeatable)")
     p.add_argument("--resume", action="store_true", help="continue each group from its latest checkpoint")
+    p.add_argument("--skip-gate", action="store_true",
+                   help="train on references that fail the physics gate (robot-hoi retarget: the reference replayed "
+                        "with the pelvis held loses the object or a held contact); default: refuse them")
     p.add_argument("--init", default=None, metavar="CHECKPOINT",
                    help="start each teacher from this policy's weights and normalisers (a base policy or another "
                         "clip's teacher; same observation layout), with fresh optimiser and counters; ignored where "
@@ -177,6 +180,8 @@ def run(args: argparse.Namespace) -> int:
             print(f"{clip.name}: object {clip.object_name} from {clip.object.origin}")
     groups = factory.group_sources(sources, clips, args.group)
     out = Path(args.out) if args.out else _default_out(embodiment.name)
+    if not args.skip_gate:
+        _physics_gate(clips, groups, out, env_cfg, embodiment)
     print(f"training {len(groups)} teacher(s) on {len(clips)} clip(s) -> {out}")
     flags = {key: getattr(args, key) for key in recipes.FLAGS}
     recipes.write_record(out, recipes.resolved(recipe, flags, args.overrides), recipe)
@@ -262,6 +267,20 @@ def _default_out(embodiment: str) -> Path:
     import time
 
     return Path("runs") / f"{time.strftime('%Y%m%d-%H%M%S')}-{embodiment}"
+
+
+def _physics_gate(clips: list, groups: dict[str, list[int]], out: Path, env_cfg, embodiment) -> None:
+    """Refuse references that fail the physics gate (robot_hoi.tasks.interaction.feasibility), each retargeted
+    into its teacher's reference cache."""
+    from robot_hoi.errors import UserError
+    from robot_hoi.tasks.interaction.feasibility import format_verdict, gate_failures
+
+    folder = {i: out / name / "references" for name, members in groups.items() for i in members}
+    failed = gate_failures(clips, env_cfg, embodiment, [folder[i] for i in range(len(clips))])
+    if failed:
+        reasons = "; ".join(f"{name}: {format_verdict(gate)}" for name, gate in failed)
+        raise UserError(f"physics gate: {reasons}. The reference loses the object with the pelvis held and no "
+                        "residual; --skip-gate trains anyway")
 
 
 def _split_budget(budget, parts: int):

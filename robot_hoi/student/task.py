@@ -49,10 +49,7 @@ def make_scene(clip, embodiment, env_cfg: InteractionEnvCfg):
 
     if clip.object is None:
         raise UserError(f"clip {clip.name}: no object mesh loaded; the simulation needs it")
-    return InteractionScene(embodiment, clip.object, self_collision=env_cfg.self_collision,
-                            density=env_cfg.object_density, friction=env_cfg.object_friction,
-                            torsional_friction=env_cfg.object_torsional_friction,
-                            object_collision=env_cfg.object_collision)
+    return InteractionScene.for_task(embodiment, clip.object, env_cfg)
 
 
 def check_single_object(clips) -> None:

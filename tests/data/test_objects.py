@@ -94,7 +94,7 @@ def test_shared_object_without_its_obj_inspects_retargets_and_trains(motions, tm
     assert "from convex hull of" in capsys.readouterr().out
     assert main(["retarget", str(clip_path), "--objects", objects, "-o", str(tmp_path / "ref.npz")]) == 0
     capsys.readouterr()
-    assert main(["train", "--data", str(clip_path), "--objects", objects, "--budget", "1it",
+    assert main(["train", "--data", str(clip_path), "--objects", objects, "--budget", "1it", "--skip-gate",
                  "--out", str(tmp_path / "run"), "--eval-episodes", "1",
                  "--set", "env.num_envs=4", "--set", "ppo.horizon=4", "--set", "env.backend=cpu"]) == 0
     assert "object largebox from convex hull" in capsys.readouterr().out

@@ -56,3 +56,26 @@ def test_missing_clip_is_a_one_line_error(tmp_path, capsys):
 @pytest.mark.parametrize("flag", [["--video-stride", "0", "--video", "x.mp4"], ["--video", "x.avi"]])
 def test_bad_video_flags(tmp_path, capsys, flag):
     assert main(["retarget", "-o", str(tmp_path / "m.npz"), *flag]) == 2
+
+
+def test_a_folder_of_clips_prints_one_feasibility_table(tmp_path, capsys):
+    """One row per clip with its physics-gate verdict; a clip that does not load is a row saying why."""
+    from robot_hoi.data.synth import embedded_clip
+
+    folder = tmp_path / "clips"
+    embedded_clip("lift_place").save(folder / "lift_place.npz")
+    (folder / "broken.pt").write_bytes(b"not a clip")
+    assert main(["retarget", str(folder), "-o", str(tmp_path / "motions")]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    table = lines[lines.index(next(line for line in lines if line.startswith("clip "))):]
+    assert table[0].split()[:3] == ["clip", "frames", "held"]
+    rows = {line.split()[0]: line for line in table[1:-1]}
+    assert set(rows) == {"broken.pt", "synth_lift_place_seed0"}
+    assert "ERROR" in rows["broken.pt"] and rows["synth_lift_place_seed0"].split()[3] in ("PASS", "FAIL")
+    assert table[-1].endswith("clips pass the physics gate")
+    assert (tmp_path / "motions" / "synth_lift_place_seed0.npz").is_file()
+
+
+def test_a_folder_with_a_video_or_a_file_output_is_refused(tmp_path, capsys):
+    assert main(["retarget", str(tmp_path), "-o", str(tmp_path / "m.npz")]) == 2
+    assert "names a folder" in capsys.readouterr().err

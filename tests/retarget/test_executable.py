@@ -249,15 +249,15 @@ def test_hold_test_starts_just_before_the_grip_not_at_the_walk_up(monkeypatch):
     the assist's per-episode draw (half of the training episodes) had left it free."""
     from robot_hoi.data.synth import embedded_clip
     from robot_hoi.embodiment import load_embodiment
-    from robot_hoi.rl.eval_cli import TASK_CONFIG
+    from robot_hoi.paths import TASK_CONFIG
     from robot_hoi.tasks.interaction import factory
     from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg
-    from robot_hoi.tasks.interaction.feasibility import hold_test
+    from robot_hoi.tasks.interaction.feasibility import physics_gate
     from robot_hoi.utils.config import load_yaml_dataclass
 
     envs, make_env = [], factory.make_env
     monkeypatch.setattr(factory, "make_env", lambda *a, **k: envs.append(make_env(*a, **k)) or envs[-1])
-    result = hold_test(embedded_clip("lift_carry"), load_yaml_dataclass(InteractionEnvCfg, TASK_CONFIG),
+    result = physics_gate(embedded_clip("lift_carry"), load_yaml_dataclass(InteractionEnvCfg, TASK_CONFIG),
                        load_embodiment("g1_inspire"), lead_frames=10)
     assert result["first_held_frame"] > 60  # after the walk-up
     assert result["start_frame"] == result["first_held_frame"] - 10

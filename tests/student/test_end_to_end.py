@@ -65,7 +65,7 @@ def test_two_teachers_one_student(tmp_path, capsys):
 
     teachers = tmp_path / "teachers"
     assert main(["train", "--data", "embedded:lift_carry", "embedded:lift_place", "--group", "clip", "--budget", "2it",
-                 "--out", str(teachers), *QUIET, "--set", "model.actor_hidden_dims=[32]",
+                 "--skip-gate", "--out", str(teachers), *QUIET, "--set", "model.actor_hidden_dims=[32]",
                  "--set", "model.critic_hidden_dims=[32]"]) == 0
     groups = sorted(p.name for p in teachers.iterdir() if p.is_dir())
     assert len(groups) == 2

@@ -146,6 +146,10 @@ class InteractionEnvCfg:
     object_friction: float = 0.9            # supp. Table A
     object_torsional_friction: float = 0.0  # m; > 0: the object's contacts resist turning about their normal
     object_surface_points: int = 256        # samples for d_t
+    # MuJoCo's friction model for every contact: "pyramidal" | "elliptic" cones, and impratio (frictional-to-normal
+    # impedance ratio; > 1 makes friction stiffer, MuJoCo applies it to elliptic cones). Chosen by the physics gate
+    friction_cone: str = "pyramidal"
+    impratio: float = 1.0
     self_collision: bool = False
     action_clip: float = 4.0
     # PD target = offset + action_scale * action. "reference": offset = the retargeted reference joints of the frame
@@ -174,6 +178,10 @@ class InteractionEnvCfg:
         from robot_hoi.data.objects import check_object_collision
 
         check_object_collision(self.object_collision, ValueError)  # the config loader names the file
+        if self.friction_cone not in ("pyramidal", "elliptic"):
+            raise ValueError(f"friction_cone must be pyramidal or elliptic, not {self.friction_cone!r}")
+        if not self.impratio >= 1.0:
+            raise ValueError(f"impratio must be >= 1, got {self.impratio}")
         if self.reward_set:
             apply_reward_set(self, self.reward_set)
             self.reward_set = None

@@ -192,10 +192,7 @@ def make_env(clips: list, env_cfg: InteractionEnvCfg, embodiment, cache: Path | 
         raise UserError(f"one environment holds one object; these clips use {sorted(objects)}")
     if clips[0].object is None:
         raise UserError(f"clip {clips[0].name}: no object mesh loaded; the simulation needs it")
-    scene = InteractionScene(embodiment, clips[0].object, self_collision=env_cfg.self_collision,
-                             density=env_cfg.object_density, friction=env_cfg.object_friction,
-                             torsional_friction=env_cfg.object_torsional_friction,
-                             object_collision=env_cfg.object_collision)
+    scene = InteractionScene.for_task(embodiment, clips[0].object, env_cfg)
     motions = motions or [load_or_retarget(c, embodiment, cache, retarget_options(env_cfg)) for c in clips]
     references = [build_reference(c, m, env_cfg.reference_links) for c, m in zip(clips, motions, strict=True)]
     env = InteractionEnv(env_cfg, scene, references)

@@ -16,7 +16,7 @@ HAND_LINK_MARKERS = ("_tip", "hand_base")
 class InteractionScene:
     def __init__(self, embodiment, object_asset, *, self_collision: bool = False, density: float = 25.0,
                  friction: float = 0.9, torsional_friction: float = 0.0, timestep: float | None = None,
-                 object_collision: str = "hull"):
+                 object_collision: str = "hull", friction_cone: str = "pyramidal", impratio: float = 1.0):
         from robot_hoi.embodiment import build_robot_spec
 
         self.embodiment = embodiment
@@ -26,6 +26,8 @@ class InteractionScene:
                                         torsional_friction=torsional_friction, object_collision=object_collision)
         if timestep is not None:
             spec.option.timestep = timestep
+        spec.option.cone = getattr(mujoco.mjtCone, f"mjCONE_{friction_cone.upper()}")
+        spec.option.impratio = impratio
         self.spec = spec
         self.model = spec.compile()
         self.layout = self._resolve_layout(contact_names)
@@ -39,6 +41,14 @@ class InteractionScene:
         self.pelvis_body_id = int(self.model.jnt_bodyid[0])  # the free joint's body
         self.object_mass = float(self.model.body_mass[self.object_body_id()])
         self.feet_link_ids = [i for i, n in enumerate(self.layout.link_names) if "ankle" in n or "toe" in n]
+
+    @classmethod
+    def for_task(cls, embodiment, object_asset, env_cfg) -> InteractionScene:
+        """The scene an InteractionEnvCfg describes (object physics, collision shape, friction model)."""
+        return cls(embodiment, object_asset, self_collision=env_cfg.self_collision, density=env_cfg.object_density,
+                   friction=env_cfg.object_friction, torsional_friction=env_cfg.object_torsional_friction,
+                   object_collision=env_cfg.object_collision, friction_cone=env_cfg.friction_cone,
+                   impratio=env_cfg.impratio)
 
     def _resolve_layout(self, contact_names: list[str]) -> SceneLayout:
         m = self.model
