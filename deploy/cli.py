@@ -71,6 +71,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         help="body/hand/tracker data older than N control periods -> DAMP (default 2)")
     safety.add_argument("--max-overruns", type=int, default=None, metavar="N",
                         help="more than N loop overruns within 1 s -> DAMP (default 5)")
+    safety.add_argument("--max-stall-periods", type=float, default=None, metavar="N",
+                        help="one tick ending more than N periods after its deadline -> DAMP (default 2)")
+    safety.add_argument("--watchdog-s", type=float, default=None, metavar="S",
+                        help="loop heartbeat silent S seconds while commanding: the watchdog (a separate process "
+                             "for the DDS body) damps the robot (default 0.2; 0 = off)")
     safety.add_argument("--min-hand-rate-share", type=float, default=None, metavar="F",
                         help="hands acknowledging commands below F x the loop rate (over 1 s) -> DAMP (default 0.5)")
     safety.add_argument("--max-motor-temp", dest="max_motor_temp_c", type=float, default=None, metavar="C",
@@ -94,11 +99,13 @@ def options_from_args(args: argparse.Namespace):
     from deploy.session import DeployOptions
 
     safety = SafetyConfig()
-    for name in ("zero_torque_s", "ramp_s", "damp_s", "max_input_age_periods", "max_overruns",
-                 "min_hand_rate_share", "max_motor_temp_c"):
+    for name in ("zero_torque_s", "ramp_s", "damp_s", "max_input_age_periods", "max_overruns", "max_stall_periods",
+                 "watchdog_s", "min_hand_rate_share", "max_motor_temp_c"):
         value = getattr(args, name)
         if value is not None:
             setattr(safety, name, value)
+    if safety.watchdog_s is not None and safety.watchdog_s <= 0:
+        safety.watchdog_s = None
     return DeployOptions(
         policy=args.policy, motion=args.motion, embodiment=args.embodiment, dry_run=args.dry_run,
         hand_bus=args.hand_bus, hand_ports=args.hand_port, hand_ids=args.hand_id, can_channel=args.can_channel,

@@ -6,8 +6,6 @@ so a fake clock makes every timing decision deterministic in tests.
 
 from __future__ import annotations
 
-import contextlib
-import os
 import time
 from typing import Protocol
 
@@ -62,21 +60,3 @@ class FakeClock:
     def sleep_until(self, deadline: float) -> None:
         self.sleeps.append(deadline)
         self.t = max(self.t, deadline)
-
-
-def set_realtime(priority: int | None) -> tuple[str, str | None]:
-    """Give the calling thread SCHED_FIFO at `priority` (threads started before keep their own scheduling).
-    Returns (scheduling, problem): problem says why it fell back to normal scheduling."""
-    if priority is None:
-        return "normal", None
-    try:
-        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
-    except (AttributeError, PermissionError, OSError) as exc:
-        return "normal", f"real-time priority not available ({exc}); normal scheduling"
-    return f"SCHED_FIFO {priority}", None
-
-
-def restore_scheduling(priority: int | None) -> None:
-    if priority is not None:
-        with contextlib.suppress(AttributeError, PermissionError, OSError):
-            os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))

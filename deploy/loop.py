@@ -21,14 +21,13 @@ A tick, in order:
 from __future__ import annotations
 
 import contextlib
-import sys
 from dataclasses import dataclass
 
 import numpy as np
 
 from deploy.body.base import Body, BodyState
 from deploy.body_health import TickWatch, identity_faults
-from deploy.clock import Clock, MonotonicClock, restore_scheduling, set_realtime
+from deploy.clock import Clock, MonotonicClock
 from deploy.contract import PolicyContract
 from deploy.errors import BodyLinkError
 from deploy.hand_pair import Hands, HandsReading
@@ -36,6 +35,7 @@ from deploy.loop_timing import LoopTiming
 from deploy.observations import ObservationBuilder, RobotState
 from deploy.operator import OperatorInput
 from deploy.outcome import Outcome, StopRequests, classify
+from deploy.realtime import RealtimeRun
 from deploy.remote import RemotePresses
 from deploy.runlog import EventLog, TickRecorder, tick_row
 from deploy.safety import (
@@ -49,6 +49,7 @@ from deploy.safety import (
     tracker_faults,
 )
 from deploy.tracking import PoseTracker, TrackedPoses
+from deploy.watchdog import NullWatchdog
 
 GATES = (Phase.ZERO_TORQUE, Phase.HOLD)  # the phases that wait for the operator's confirmation
 PROMPTS = {
@@ -87,6 +88,8 @@ class Runtime:
         realtime_priority: int | None = None,
         expected_mode_machine: int | None = None,
         status=None,
+        lock_memory: bool = False,
+        watchdog=None,
     ):
         self.contract = contract
         self.policy = policy
@@ -106,11 +109,17 @@ class Runtime:
         self.gil_switch_interval_s = gil_switch_interval_s
         # SCHED_FIFO priority for the loop thread only (Linux; needs CAP_SYS_NICE). None: normal scheduling.
         self.realtime_priority = realtime_priority
+        self.lock_memory = lock_memory  # mlockall for the run (deploy.realtime); refused: a note, the run goes on
+        self.watchdog = watchdog or NullWatchdog()  # deploy.watchdog: damps when the heartbeat stops
+        self.scheduling = "normal"
+        self.memory = "not locked (not requested)"
         self.expected_mode_machine = expected_mode_machine
         self.num_body = contract.num_body
         self.needs_tracker = contract.uses_reference or contract.uses_object
         self.shaper = TargetShaper(contract, self.dt, self.safety.max_target_rate)
-        self.timing = LoopTiming(self.dt, self.safety.max_overruns, self.safety.overrun_window_s)
+        stall = self.safety.max_stall_periods
+        self.timing = LoopTiming(self.dt, self.safety.max_overruns, self.safety.overrun_window_s,
+                                 None if stall is None else stall * self.dt)
         self.tick_watch = TickWatch(self.safety.max_input_age_periods * self.dt)
         self.remote = RemotePresses()
 
@@ -118,8 +127,8 @@ class Runtime:
         self.phase_since = self.clock.now()
         self.phase_time: dict[str, float] = {}
         self.last_action = np.zeros(contract.num_actions)
-        self.policy_tick = 0
-        self._policy_deadline0 = 0.0
+        self.policy_tick = 0  # policy steps taken: the reference clock, one frame a step (never skips after a stall)
+        self._next_policy_tick = 0
         self._ramp_from: np.ndarray | None = None
         self._confirmed = False  # the operator confirmed the gate the runtime is waiting at
         self.start_refusal: str | None = None  # why the last start in HOLD was refused (on the status line)
@@ -135,6 +144,7 @@ class Runtime:
         self._last_measured_q = np.zeros(self.num_body)
         self._clamp_state = (frozenset(), frozenset())
         self._sync_logs = False
+        self._realtime = None  # deploy.realtime.RealtimeRun while run() runs
         self.status_errors = 0  # status lines that could not be written (terminal gone): dropped
 
     # ------------------------------------------------------------------ stop and start hooks (thread / signal safe)
@@ -178,6 +188,8 @@ class Runtime:
             self.events.log("prompt", tick=self.ticks, phase=phase.name, message=self.prompt)
         if phase == Phase.DAMP:
             self.hands.request_safe_state()
+        if self._realtime is not None:
+            self._realtime.policy_running(phase == Phase.POLICY)  # gc off from the first policy step on
         if phase == Phase.RAMP_TO_DEFAULT:
             self._hands_commanded_since = now
 
@@ -258,6 +270,7 @@ class Runtime:
             faults = input_faults(now, self.dt, self.safety, self.contract, body, reading, poses,
                                   need_tracker=self.phase == Phase.POLICY and self.needs_tracker)
             faults += identity + tick_faults + self._deferred_faults + self._hand_rate_fault(now)
+            faults += [fired] if (fired := self.watchdog.check()) else []
             self._deferred_faults = []
             if faults:
                 self.refused = self.refused or bool(identity and self.phase == Phase.ZERO_TORQUE)
@@ -283,10 +296,11 @@ class Runtime:
             target = self.contract.default_pose.copy()
             if self._can_start(now, poses):
                 self._enter(Phase.POLICY, "operator start" if self._confirmed else "auto start", now)
-                self._policy_deadline0 = deadline
+                self._next_policy_tick = 0
                 self.last_action = np.zeros(self.contract.num_actions)
         if self.phase == Phase.POLICY:
-            self.policy_tick = int(round((deadline - self._policy_deadline0) / self.dt))
+            self.policy_tick = self._next_policy_tick
+            self._next_policy_tick += 1
             target, action = self._policy_target(now, body, reading, poses)
 
         if self.phase == Phase.DAMP and now - self.phase_since >= self.safety.damp_s:
@@ -367,7 +381,9 @@ class Runtime:
         n = self.num_body
         zeros = np.zeros(n)
         hand_units = None
-        if self.phase in (Phase.RAMP_TO_DEFAULT, Phase.HOLD, Phase.POLICY) and target is not None:
+        if self.phase in HAND_COMMANDING and (fired := self.watchdog.check()):
+            self._fault([fired], self.clock.now())  # it damped while this tick computed: never stiffen after it
+        if self.phase in HAND_COMMANDING and target is not None:
             shaped = self.shaper(target)
             self._log_shaping()
             command = BodyCommand(shaped[:n], zeros, self.contract.kp[:n], self.contract.kd[:n], zeros)
@@ -443,45 +459,52 @@ class Runtime:
     def run(self, duration_s: float | None = None) -> dict:
         """Tick on absolute deadlines until the state machine stops (or duration_s ends the run through DAMP)."""
         clock = self.clock
-        start = clock.now()
-        self.phase_since = start
-        deadline = start
-        previous_interval = sys.getswitchinterval()
-        if self.gil_switch_interval_s is not None:
-            sys.setswitchinterval(self.gil_switch_interval_s)
-        self.events.log("start", rate_hz=1.0 / self.dt, policy=self.contract.source, duration_s=duration_s,
-                        scheduling=self._set_realtime())
-        try:
-            while True:
-                wake = clock.now()
-                if duration_s is not None and wake - start >= duration_s and self.stops.first is None:
-                    self.request_stop("duration reached", "duration")
-                    if self.phase == Phase.WAIT_STATE:
-                        self.exit_reason = "duration reached before inputs were ready"
-                keep_going = self.tick(deadline)
-                done = clock.now()
-                self.timing.record(wake, deadline, done)
-                self._show_status()
-                if not keep_going or (self.exit_reason and self.phase == Phase.WAIT_STATE):
-                    break
-                deadline += self.dt
-                if done > deadline:
-                    deadline += self._overrun(done, deadline) * self.dt
-                clock.sleep_until(deadline)
-        except BaseException as exc:
-            self._crash_damping(exc)
-            raise
-        finally:
-            sys.setswitchinterval(previous_interval)
-            restore_scheduling(self.realtime_priority)
-            end = clock.now()
-            self.phase_time[self.phase.name] = self.phase_time.get(self.phase.name, 0.0) + (end - self.phase_since)
-            self.phase_since = end
-            with contextlib.suppress(Exception):  # the robot is damped; what is left is paperwork
-                self.events.log("stop", reason=self.exit_reason or self.stops.reason or "", ticks=self.ticks,
-                                final_phase=self.phase.name, outcome=self.outcome.name)
-                self.events.sync(wait_s=2.0)
-                self.recorder.sync(wait_s=2.0)
+        crashed = False
+        with RealtimeRun(self.gil_switch_interval_s, self.realtime_priority, self.lock_memory) as rt:
+            self.scheduling, self.memory, self._realtime = rt.scheduling, rt.memory, rt
+            for problem in (rt.scheduling_problem, None if rt.memory == "locked" or not self.lock_memory
+                            else f"memory {rt.memory}"):
+                if problem:
+                    self.events.log("warning", reason=problem)
+            start = clock.now()
+            self.phase_since = start
+            deadline = start
+            self.events.log("start", rate_hz=1.0 / self.dt, policy=self.contract.source, duration_s=duration_s,
+                            scheduling=self.scheduling, memory=self.memory, watchdog=self.watchdog.description)
+            self.watchdog.start(lambda: self._send_damping(None))
+            try:
+                while True:
+                    wake = clock.now()
+                    if duration_s is not None and wake - start >= duration_s and self.stops.first is None:
+                        self.request_stop("duration reached", "duration")
+                        if self.phase == Phase.WAIT_STATE:
+                            self.exit_reason = "duration reached before inputs were ready"
+                    keep_going = self.tick(deadline)
+                    self.watchdog.beat(commanding=self.phase != Phase.WAIT_STATE)
+                    done = clock.now()
+                    self.timing.record(wake, deadline, done)
+                    self._show_status()
+                    if not keep_going or (self.exit_reason and self.phase == Phase.WAIT_STATE):
+                        break
+                    deadline += self.dt
+                    if done > deadline:
+                        deadline += self._overrun(done, deadline) * self.dt
+                    clock.sleep_until(deadline)
+            except BaseException as exc:
+                crashed = True
+                self._crash_damping(exc)
+                raise
+            finally:
+                self._realtime = None
+                self.watchdog.end(clean=not crashed)  # after a crash it stays armed: it damps when we are gone
+                end = clock.now()
+                self.phase_time[self.phase.name] = self.phase_time.get(self.phase.name, 0.0) + (end - self.phase_since)
+                self.phase_since = end
+                with contextlib.suppress(Exception):  # the robot is damped; what is left is paperwork
+                    self.events.log("stop", reason=self.exit_reason or self.stops.reason or "", ticks=self.ticks,
+                                    final_phase=self.phase.name, outcome=self.outcome.name)
+                    self.events.sync(wait_s=2.0)
+                    self.recorder.sync(wait_s=2.0)
         return self.summary()
 
     def _crash_damping(self, exc: BaseException) -> None:
@@ -507,12 +530,6 @@ class Runtime:
             self._deferred_faults.append(problem)
         return skipped
 
-    def _set_realtime(self) -> str:
-        self.scheduling, problem = set_realtime(self.realtime_priority)
-        if problem:
-            self.events.log("warning", reason=problem)
-        return self.scheduling
-
     def summary(self) -> dict:
         outcome = self.outcome
         commanded_s = self.phase_time_commanding()
@@ -527,7 +544,9 @@ class Runtime:
             "faults": list(self.fault_reasons),
             "rate_hz": 1.0 / self.dt,
             "hand_rate_hz": 1.0 / (self.dt * self.hands.every_n_ticks),
-            "scheduling": getattr(self, "scheduling", "normal"),
+            "scheduling": self.scheduling,
+            "memory": self.memory,
+            "watchdog": self.watchdog.description,
             "ticks": self.ticks,
             "policy_steps": self.policy_steps,
             "phase_time_s": dict(self.phase_time),

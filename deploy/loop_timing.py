@@ -19,12 +19,15 @@ def stats_ms(values, absolute: bool = False, minus: float = 0.0) -> dict:
 
 class LoopTiming:
     """Per-tick timing, and overruns: a tick that finished after the next deadline. More than `max_overruns`
-    overruns within `window_s` is a fault (the caller decides when it matters)."""
+    overruns within `window_s`, or a single one that ends more than `max_stall_s` after its deadline (the process
+    stalled), is a fault (the caller decides when it matters)."""
 
-    def __init__(self, dt: float, max_overruns: int | None, window_s: float):
+    def __init__(self, dt: float, max_overruns: int | None, window_s: float, max_stall_s: float | None = None):
         self.dt = dt
         self.max_overruns = max_overruns
         self.window_s = window_s
+        self.max_stall_s = max_stall_s
+        self._stall: float | None = None  # how far past its deadline the latest overrun ended
         self.lateness: list[float] = []
         self.period: list[float] = []
         self.compute: list[float] = []
@@ -43,6 +46,7 @@ class LoopTiming:
     def overrun(self, done: float, next_deadline: float) -> int:
         """Count an overrun; returns how many deadlines were skipped."""
         skipped = math.ceil((done - next_deadline) / self.dt)
+        self._stall = done - next_deadline
         self.overruns += 1
         self.missed_deadlines += skipped
         self._recent.append(done)
@@ -51,6 +55,9 @@ class LoopTiming:
         return skipped
 
     def overrun_fault(self) -> str | None:
+        if self.max_stall_s is not None and self._stall is not None and self._stall > self.max_stall_s:
+            return (f"loop stalled {self._stall * 1e3:.0f} ms past its deadline (limit {self.max_stall_s * 1e3:.1f} ms "
+                    f"({self.max_stall_s / self.dt:g} periods))")
         if self.max_overruns is None or len(self._recent) <= self.max_overruns:
             return None
         return f"loop overran {len(self._recent)} deadlines within {self.window_s:g} s (limit {self.max_overruns})"

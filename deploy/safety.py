@@ -66,6 +66,8 @@ class SafetyConfig:
     max_motor_temp_c: float = 90.0  # a body motor at or above this -> refuse the start / DAMP
     max_overruns: int | None = 5  # more loop overruns than this within overrun_window_s -> DAMP (None: count only)
     overrun_window_s: float = 1.0
+    max_stall_periods: float | None = 2.0  # one tick ending more than this many periods late -> DAMP
+    watchdog_s: float | None = 0.2  # loop heartbeat silent this long while commanding: the watchdog damps
     min_hand_rate_share: float | None = 0.5  # acknowledged hand commands per s below this share of the loop rate
     hand_rate_window_s: float = 1.0  # ... over this window -> DAMP (None: report only)
     hand_bus_budget_share: float = 0.8  # share of a period one hand link's wire time may fill (start-up check)

@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from deploy.atomic import atomic_write_text
+from deploy.body.unitree_dds import UnitreeDdsBody
 from deploy.clock import MonotonicClock
 from deploy.contract import check_against_embodiment
 from deploy.embodiment import load_embodiment, resolve_embodiment_path
@@ -130,10 +131,13 @@ class Session(contextlib.ExitStack):
         operator = OperatorInput() if auto_start else KeyboardOperator()
         status = make_status_view(o.status)
         self.callback(status.close)
+        mode_machine = load_embodiment(embodiment_path).mode_machine
+        watchdog = self._watchdog(body, contract, rate, mode_machine)
         self.runtime = Runtime(contract, policy, ObservationBuilder(contract, motion), body, tracker, hands,
                                clock=self.clock, safety=safety, operator=operator, events=events,
                                recorder=recorder, rate_hz=rate, realtime_priority=o.realtime_priority,
-                               expected_mode_machine=load_embodiment(embodiment_path).mode_machine, status=status)
+                               expected_mode_machine=mode_machine, status=status, lock_memory=not o.dry_run,
+                               watchdog=watchdog)
         events.log("session", **self.description, log_dir=str(log_dir))
         events.log("hand_budget", every_n_ticks=hands.every_n_ticks, message=self.description["hand_budget"])
 
@@ -200,8 +204,6 @@ class Session(contextlib.ExitStack):
 
             body = SimulatedBody(contract.num_body, clock=self.clock)
         elif kind == "dds":
-            from deploy.body.unitree_dds import UnitreeDdsBody
-
             interface = o.dds_interface
             if o.dry_run:
                 from deploy.body.dds_loopback import DdsLoopbackRobot
@@ -219,6 +221,24 @@ class Session(contextlib.ExitStack):
             raise DeployError(f"the body did not come up: {exc}") from exc
         self.callback(body.close)
         return body
+
+    def _watchdog(self, body, contract, rate: float, mode_machine: int | None):
+        """Damps when the loop's heartbeat stops: a child process with its own DDS participant for a DDS body (it
+        outlives a killed runtime), a thread for the in-process simulated body."""
+        from deploy.watchdog import NullWatchdog, ProcessWatchdog, ThreadWatchdog
+
+        o = self.options
+        if o.safety.watchdog_s is None:
+            watchdog = NullWatchdog()
+        elif isinstance(body, UnitreeDdsBody):
+            watchdog = ProcessWatchdog(timeout_s=o.safety.watchdog_s, damp_s=o.safety.damp_s, period_s=1.0 / rate,
+                                       damp_kd=o.safety.damp_kd, num_joints=contract.num_body,
+                                       domain_id=o.dds_domain, interface=body.interface, mode_machine=mode_machine)
+        else:
+            watchdog = ThreadWatchdog(o.safety.watchdog_s)
+        self.callback(watchdog.close)
+        self.description["watchdog"] = watchdog.description
+        return watchdog
 
     def _tracker(self, motion):
         o = self.options

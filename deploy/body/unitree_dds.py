@@ -138,6 +138,17 @@ def dds_domain_config(interface: str | None) -> str | None:
 _DOMAINS: dict[int, object] = {}
 
 
+def dds_participant(domain_id: int, interface: str | None):
+    """A DomainParticipant on `domain_id`, pinned to `interface` (cyclonedds allows one configured Domain per id
+    and process: the first caller's interface holds)."""
+    from cyclonedds.domain import Domain, DomainParticipant
+
+    config = dds_domain_config(interface)
+    if config and domain_id not in _DOMAINS:
+        _DOMAINS[domain_id] = Domain(domain_id, config)
+    return DomainParticipant(domain_id)
+
+
 class DdsEndpoint:
     """One DDS participant with a reader (history: the newest sample only) and a writer.
 
@@ -151,16 +162,12 @@ class DdsEndpoint:
                  write_type, on_sample=None):
         _require_cyclonedds()
         from cyclonedds.core import InstanceState, ReadCondition, SampleState, ViewState, WaitSet
-        from cyclonedds.domain import Domain, DomainParticipant
         from cyclonedds.pub import DataWriter
         from cyclonedds.qos import Policy, Qos
         from cyclonedds.sub import DataReader
         from cyclonedds.topic import Topic
 
-        config = dds_domain_config(interface)
-        if config and domain_id not in _DOMAINS:  # cyclonedds allows one configured Domain per id and process
-            _DOMAINS[domain_id] = Domain(domain_id, config)
-        self.participant = DomainParticipant(domain_id)
+        self.participant = dds_participant(domain_id, interface)
         self.reader = DataReader(self.participant, Topic(self.participant, read_topic, read_type),
                                  qos=Qos(Policy.History.KeepLast(1)))
         self.writer = DataWriter(self.participant, Topic(self.participant, write_topic, write_type))

@@ -15,7 +15,8 @@ from deploy.safety import Phase
 # Staleness is tested on the fake clock; a generous limit keeps these real-time runs stable on a busy machine.
 # Overruns and the hand rate are tested on the fake clock too; here only a grossly broken run may trip them.
 FAST = ["--zero-torque-s", "0.1", "--ramp-s", "0.3", "--damp-s", "0.2", "--auto-start", "--max-input-age-periods", "10",
-        "--hand-timeout", "0.1", "--max-overruns", "1000", "--min-hand-rate-share", "0.2", "--status", "plain"]
+        "--hand-timeout", "0.1", "--max-overruns", "1000", "--max-stall-periods", "30", "--watchdog-s", "2",
+        "--min-hand-rate-share", "0.2", "--status", "plain"]
 
 
 def check_run(log_dir, contract: PolicyContract, min_policy_steps: int):

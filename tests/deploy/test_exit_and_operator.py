@@ -88,8 +88,8 @@ def test_real_body_stays_limp_until_the_operator_confirms(dev_policy, tmp_path):
         [sys.executable, "-m", "deploy", "--policy", str(dev_policy), "--dds-interface", "lo", "--dds-domain",
          str(domain), "--tracker", "sim", "--hand-port", sims[0].port, sims[1].port, "--duration", "60",
          "--log-dir", str(tmp_path), "--zero-torque-s", "0.1", "--ramp-s", "0.3", "--damp-s", "0.2",
-         "--max-input-age-periods", "30", "--hand-timeout", "0.1", "--max-overruns", "1000", "--min-hand-rate-share",
-         "0.2", "--status", "plain"],
+         "--max-input-age-periods", "30", "--hand-timeout", "0.1", "--max-overruns", "1000", "--max-stall-periods",
+         "30", "--watchdog-s", "2", "--min-hand-rate-share", "0.2", "--status", "plain"],
         cwd=REPO, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         wait_for_event(tmp_path, '"to": "ZERO_TORQUE"')

@@ -43,7 +43,7 @@ def test_every_deploy_module_imports_and_dry_run_works_without_heavy_packages(de
     argv = ["--dry-run", "--policy", str(dev_policy), "--duration", "2.0", "--log-dir", str(tmp_path),
             "--zero-torque-s", "0.1", "--ramp-s", "0.3", "--damp-s", "0.2", "--auto-start", "--hand-bus", "can",
             "--max-input-age-periods", "10", "--hand-timeout", "0.1", "--max-overruns", "1000",
-            "--min-hand-rate-share", "0.2"]
+            "--max-stall-periods", "30", "--watchdog-s", "2", "--min-hand-rate-share", "0.2"]
     proc = subprocess.run([sys.executable, "-c", SCRIPT, *argv], cwd=REPO, capture_output=True, text=True,
                           timeout=120)
     assert proc.returncode == 0, proc.stderr[-3000:]

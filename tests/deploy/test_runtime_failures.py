@@ -210,3 +210,186 @@ def test_only_loopback_interfaces_count_as_a_simulator():
 
     assert is_loopback_interface("lo")
     assert not is_loopback_interface("eth0") and not is_loopback_interface("no-such-if0")
+
+
+# ------------------------------------------------------------------ 4. a stalled loop: the stall bound, the reference clock, the watchdog
+class Stall:
+    """Wraps the policy: at step `at`, the process stalls for `seconds` (fake time, and real time if `real`)."""
+
+    def __init__(self, rig, at: int, seconds: float, real: bool = False):
+        self.rig, self.at, self.seconds, self.real = rig, at, seconds, real
+        self.inner = rig.policy
+        self.calls = 0
+        self.ticks: list[int] = []
+        self.commands_when_resumed: int | None = None
+
+    def __call__(self, obs):
+        import time
+
+        self.calls += 1
+        self.ticks.append(self.rig.runtime.policy_tick)
+        if self.calls == self.at:
+            if self.real:
+                time.sleep(self.seconds)
+            self.rig.clock.advance(self.seconds)
+            self.commands_when_resumed = len(self.rig.body.commands)
+        return self.inner(obs)
+
+
+def test_a_half_second_stall_in_policy_damps(dev_policy):
+    rig = RuntimeRig(dev_policy, safety=SafetyConfig(**FAST))
+    rig.runtime.policy = Stall(rig, 20, 0.5)
+    summary = rig.runtime.run(duration_s=10.0)
+    assert_ends_damped(rig, summary, "FAULT", 1)
+    assert summary["faults"][0].startswith("loop stalled") and "limit 66.7 ms (2 periods)" in summary["faults"][0]
+    assert summary["overruns"] == 1
+
+
+def test_the_reference_clock_does_not_jump_after_a_late_tick(dev_policy):
+    rig = RuntimeRig(dev_policy, safety=SafetyConfig(**FAST))
+    stall = Stall(rig, 20, 1.5 * rig.dt)  # one deadline missed: under the stall bound, the policy goes on
+    rig.runtime.policy = stall
+    summary = rig.runtime.run(duration_s=3.0)
+    assert summary["outcome"] == "COMPLETED" and summary["missed_deadlines"] >= 1
+    assert stall.ticks == list(range(len(stall.ticks)))  # one reference frame per policy step, none skipped
+
+
+def test_gc_is_off_during_policy_and_restored_after(dev_policy):
+    import gc
+
+    rig = RuntimeRig(dev_policy, safety=SafetyConfig(**FAST))
+    seen = []
+    inner = rig.policy
+    rig.runtime.policy = lambda obs: (seen.append((gc.isenabled(), gc.get_freeze_count() > 0)), inner(obs))[1]
+    assert gc.isenabled()
+    rig.runtime.run(duration_s=2.0)
+    assert seen and all(s == (False, True) for s in seen)
+    assert gc.isenabled() and gc.get_freeze_count() == 0
+
+
+def test_memory_is_locked_where_allowed_and_a_refusal_is_a_note(dev_policy, monkeypatch):
+    from deploy import realtime
+
+    calls = []
+    monkeypatch.setattr(realtime, "_mlockall", lambda flags: (calls.append(flags), errno.EPERM)[1])
+    monkeypatch.setattr(realtime, "_munlockall", lambda: calls.append("unlock"))
+    rig = RuntimeRig(dev_policy, safety=SafetyConfig(**FAST))
+    rig.runtime.lock_memory = True
+    summary = rig.runtime.run(duration_s=2.0)
+    assert calls[0] == realtime.MCL_CURRENT | realtime.MCL_FUTURE
+    assert summary["outcome"] == "COMPLETED" and summary["memory"].startswith("not locked (Operation not permitted")
+    monkeypatch.setattr(realtime, "_mlockall", lambda flags: (calls.append(flags), 0)[1])
+    assert realtime.lock_memory() is None
+
+
+def test_watchdog_thread_damps_a_stuck_loop_before_it_resumes(dev_policy):
+    from deploy.watchdog import ThreadWatchdog
+
+    rig = RuntimeRig(dev_policy, safety=SafetyConfig(**FAST))
+    rig.runtime.watchdog = ThreadWatchdog(timeout_s=0.1)
+    stall = Stall(rig, 20, 0.6, real=True)  # the loop thread is stuck for 0.6 s of wall time
+    rig.runtime.policy = stall
+    summary = rig.runtime.run(duration_s=10.0)
+    first_after_stall = rig.body.commands[stall.commands_when_resumed - 1]
+    assert np.all(first_after_stall["kp"] == 0) and np.all(first_after_stall["kd"] == rig.safety.damp_kd), \
+        "the watchdog damped the robot while the loop was stuck"
+    later = rig.body.commands[stall.commands_when_resumed:]
+    assert later and all(np.all(c["kp"] == 0) for c in later), "the loop never stiffened again after it"
+    assert_ends_damped(rig, summary, "FAULT", 1)
+    assert summary["faults"][0].startswith("watchdog: loop heartbeat stopped for")
+
+
+def start_against_dds_robot(dev_policy, tmp_path, *extra):
+    """A non-dry run (the DDS body, hands on their ports) against a simulated G1 on lo in this process, started
+    automatically (a loopback interface): what the robot's computer runs, with the robot simulated."""
+    import subprocess
+    import sys
+
+    pytest.importorskip("cyclonedds")
+    from deploy.body.dds_loopback import DdsLoopbackRobot
+    from deploy.hands.simulated import start_simulated_hand
+
+    from .conftest import REPO
+
+    domain = 200 + os.getpid() % 50
+    robot = DdsLoopbackRobot(domain, "lo").start()
+    sims = [start_simulated_hand("serial", side) for side in ("left", "right")]
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "deploy", "--policy", str(dev_policy), "--dds-interface", "lo", "--dds-domain",
+         str(domain), "--auto-start-on", "lo", "--tracker", "sim", "--hand-port", sims[0].port, sims[1].port,
+         "--duration", "60", "--log-dir", str(tmp_path), "--zero-torque-s", "0.1", "--ramp-s", "0.3",
+         "--max-input-age-periods", "30", "--hand-timeout", "0.1", "--max-overruns", "1000",
+         "--max-stall-periods", "30", "--min-hand-rate-share", "0.2", "--status", "plain", *extra],
+        cwd=REPO, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+    def cleanup():
+        proc.kill()
+        proc.wait()
+        robot.stop()
+        for sim in sims:
+            sim.stop()
+
+    return proc, robot, cleanup
+
+
+def wait_until(predicate, timeout_s: float) -> bool:
+    import time
+
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if predicate():
+            return True
+        time.sleep(0.02)
+    return False
+
+
+def is_damping(frame, kd: float = 8.0) -> bool:
+    return frame is not None and float(np.max(frame.kp[:29])) == 0.0 and np.allclose(frame.kd[:29], kd)
+
+
+def wait_for_policy(tmp_path, proc):
+    events = tmp_path / "events.jsonl"
+    assert wait_until(lambda: events.is_file() and '"to": "POLICY"' in events.read_text() or proc.poll() is not None,
+                      60.0), "never reached POLICY"
+    assert proc.poll() is None, proc.communicate()[1][-3000:]
+
+
+def test_sigkill_of_the_runtime_ends_damped_by_the_watchdog_process(dev_policy, tmp_path):
+    import signal
+
+    proc, robot, cleanup = start_against_dds_robot(dev_policy, tmp_path, "--watchdog-s", "1.0", "--damp-s", "0.5")
+    try:
+        wait_for_policy(tmp_path, proc)
+        assert wait_until(lambda: robot.last_command is not None and float(np.max(robot.last_command.kp)) > 0, 5.0)
+        received = robot.commands_received
+        proc.send_signal(signal.SIGKILL)  # no handler, no finally: only the watchdog process is left
+        proc.wait()
+        assert wait_until(lambda: robot.commands_received > received and is_damping(robot.last_command), 10.0), \
+            "the robot kept its last stiff command"
+    finally:
+        cleanup()
+
+
+def test_a_frozen_runtime_is_damped_by_the_watchdog_process_and_then_faults(dev_policy, tmp_path):
+    import json
+    import signal
+    import time
+
+    proc, robot, cleanup = start_against_dds_robot(dev_policy, tmp_path, "--watchdog-s", "0.5", "--damp-s", "0.5")
+    try:
+        wait_for_policy(tmp_path, proc)
+        proc.send_signal(signal.SIGSTOP)  # the whole runtime stalls (an unscheduled process, a swap storm)
+        try:
+            assert wait_until(lambda: is_damping(robot.last_command), 10.0), "nobody damped the stalled robot"
+        finally:
+            time.sleep(0.2)
+            proc.send_signal(signal.SIGCONT)
+        out, err = proc.communicate(timeout=60)
+        assert proc.returncode == 1, err[-3000:]
+        summary = json.loads((tmp_path / "summary.json").read_text())
+        assert summary["outcome"] == "FAULT" and summary["final_phase"] == "DAMP"
+        assert any(f.startswith("watchdog: loop heartbeat stopped") or f.startswith("loop stalled")
+                   for f in summary["faults"]), summary["faults"]
+        assert is_damping(robot.last_command)
+    finally:
+        cleanup()
