@@ -102,7 +102,7 @@ def lift_hold(substeps: int, clip) -> dict:
 def checkpoint_eval(substeps: int, checkpoint: str, episodes: int) -> dict:
     from robot_hoi.embodiment import load_embodiment
     from robot_hoi.rl.checkpoint import load_policy
-    from robot_hoi.rl.eval_cli import evaluate, evaluation_settings
+    from robot_hoi.rl.evaluation import evaluate, evaluation_settings
     from robot_hoi.tasks.interaction import factory
     from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg
     from robot_hoi.utils.config import load_dataclass

@@ -17,6 +17,8 @@ COMMAND_MODULES = {
     "retarget": "robot_hoi.retarget.cli",
     "train": "robot_hoi.rl.cli",
     "eval": "robot_hoi.rl.eval_cli",
+    "compare": "robot_hoi.rl.compare_cli",
+    "results": "robot_hoi.rl.results_cli",
     "curve": "robot_hoi.rl.curve_cli",
     "play": "robot_hoi.rl.play",
     "export": "robot_hoi.export.cli",

@@ -161,8 +161,8 @@ def run_untrained(args: argparse.Namespace) -> int:
     from robot_hoi.export.metadata import clip_identity, policy_metadata
     from robot_hoi.export.motion_sidecar import deploy_motion
     from robot_hoi.export.onnx_export import export_policy
-    from robot_hoi.rl.cli import PRESETS, TASK_CONFIG
-    from robot_hoi.rl.config import load_train_config
+    from robot_hoi.paths import TASK_CONFIG
+    from robot_hoi.rl.config import PRESETS, load_train_config
     from robot_hoi.rl.models import ActorCritic
     from robot_hoi.tasks.interaction import factory
     from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg

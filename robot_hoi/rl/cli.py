@@ -7,12 +7,12 @@ import os
 from pathlib import Path
 
 from robot_hoi.data.cli_options import add_clip_options, clip_options
-from robot_hoi.paths import CONFIGS_DIR, TASK_CONFIG
+from robot_hoi.paths import TASK_CONFIG
+from robot_hoi.rl.config import PRESETS
 from robot_hoi.rl.recipe import FLAGS, RECORD_FILE, recipe_names
 from robot_hoi.tasks.interaction.env_cfg import reward_set_names
 
 SUMMARY_FILE = "teachers.json"  # per-teacher summaries of the last `robot-hoi train` into this run folder
-PRESETS = {"paper": CONFIGS_DIR / "train" / "ppo.yaml", "fast": CONFIGS_DIR / "train" / "ppo_fast.yaml"}
 DEFAULT_BUDGET, DEFAULT_PRESET, DEFAULT_GROUP = "5m", "fast", "subject"
 
 

@@ -21,6 +21,7 @@ from robot_hoi.utils.config import load_dataclass, load_yaml_dataclass
 ACTIVATIONS = ("relu", "elu", "tanh")
 DEFAULT_PPO_CONFIG = CONFIGS_DIR / "train" / "ppo.yaml"
 FAST_PPO_CONFIG = CONFIGS_DIR / "train" / "ppo_fast.yaml"
+PRESETS = {"paper": DEFAULT_PPO_CONFIG, "fast": FAST_PPO_CONFIG}  # robot-hoi train --preset
 
 
 @dataclass

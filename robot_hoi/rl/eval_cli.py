@@ -1,195 +1,139 @@
-"""`robot-hoi eval`: InterMimic's metrics for a teacher checkpoint (or an untrained baseline), per clip.
+"""`robot-hoi eval`: success, duration, E_h and E_o of a checkpoint (teacher, student or an untrained baseline),
+per clip and pooled, under an evaluation protocol.
 
-Every episode starts from the default stand at the clip's start (with the 15-frame approach warmup), actions are
-the policy mean, and an episode ends at the clip's end or at an (interaction) early termination. Metrics:
-success rate, duration (s) until termination, E_h (cm, mean mapped-link position error excluding the hands) and
-E_o (cm, mean object surface-point error), both averaged over the imitated duration.
+By default (`--protocol randomized`) each of the 32 episodes per clip starts from the default stand at the clip's
+start with its position, heading and joints perturbed and the object's start pose perturbed (configs/eval/
+randomized.yaml), every draw reproducible from --seed; `--protocol stand` is the one deterministic start (one
+trajectory, however many episodes). Actions are the policy mean. Each episode is scored under two success
+definitions on the same starts: ours (the task's terminations, object line 0.12 m; interaction success also needs
+the object and body tracked throughout) and InterMimic's (supp. E: object and interaction lines 0.5 m, contact as
+the simulator sees it). Rates come with 95 % Wilson intervals, means with 95 % t intervals. E_h: mean mapped-link
+position error excluding the hands (cm); E_o: mean object surface-point error (cm), over the imitated duration.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+from pathlib import Path
 
 from robot_hoi.data.cli_options import add_clip_options, clip_options
-from robot_hoi.paths import TASK_CONFIG
+from robot_hoi.rl import evaluation
 
 
 def register(subparsers) -> None:
-    p = subparsers.add_parser("eval", help="evaluate a checkpoint: success, duration, E_h, E_o per clip",
-                              description=__doc__)
+    p = subparsers.add_parser("eval", help="evaluate a checkpoint under the randomized protocol: success with "
+                                           "intervals, duration, E_h, E_o per clip", description=__doc__)
     p.add_argument("checkpoint", help="a model_*.pt from `robot-hoi train` or `robot-hoi train student`, a run or "
-                                      "group folder (its latest checkpoint), or `untrained` for a baseline")
+                                      "group folder (its model_best.pt, else the latest), or `untrained` for a baseline")
     p.add_argument("--data", nargs="*", default=None, help="clips (default: the ones the checkpoint trained on)")
     add_clip_options(p)
+    add_protocol_options(p)
     p.add_argument("--embodiment", default="g1_inspire",
                    help="robot: a name under configs/embodiments/ or a YAML path")
-    p.add_argument("--episodes", type=int, default=8, help="episodes per clip (run in parallel)")
     p.add_argument("--preset", default="fast", choices=["fast", "paper"], help="network for `untrained`")
-    p.add_argument("--seed", type=int, default=0)
     p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                    help="environment override on top of the checkpoint's task config, e.g. --set "
-                        "env.self_collision=true (repeatable; the evaluation protocol's own settings still apply)")
-    p.add_argument("--json", action="store_true", help="machine-readable output")
+                        "env.self_collision=true (repeatable; applied after the protocol's settings)")
+    p.add_argument("--json", action="store_true", help="print the evaluation record as JSON")
+    p.add_argument("--out", metavar="FILE.json", help="write the evaluation record here (atomically), e.g. into "
+                                                      "docs/results/data/ for `robot-hoi results`")
+    p.add_argument("--label", help="what this evaluation stands for in the results tables (e.g. the recipe and "
+                                   "budget); default: the checkpoint path")
+    p.add_argument("--table", default="teachers", help="the results table this record belongs to")
     p.set_defaults(func=run)
 
 
+def add_protocol_options(p: argparse.ArgumentParser) -> None:
+    """The protocol flags `eval` and `compare` share."""
+    p.add_argument("--protocol", default=evaluation.DEFAULT_PROTOCOL,
+                   help="how episodes start: a name under configs/eval/ (randomized, stand) or a YAML path")
+    p.add_argument("--episodes", type=int, default=evaluation.DEFAULT_EPISODES, help="episodes per clip")
+    p.add_argument("--seed", type=int, default=evaluation.EVAL_SEED,
+                   help=f"seeds every start draw (model selection in training uses {evaluation.VALIDATION_SEED}+)")
+    p.add_argument("--mass-scale", type=float, nargs=2, metavar=("LO", "HI"), default=None,
+                   help="draw the object's mass x LO..HI per episode (log-uniform; default: the clip's mass)")
+
+
+def request_from_args(args: argparse.Namespace, checkpoint: str):
+    from robot_hoi.rl.policy_eval import EvalRequest
+
+    return EvalRequest(checkpoint=checkpoint, data=getattr(args, "data", None), protocol=args.protocol,
+                       episodes=args.episodes, seed=args.seed,
+                       mass_scale=tuple(args.mass_scale) if args.mass_scale else None,
+                       overrides=list(getattr(args, "overrides", [])), embodiment=args.embodiment,
+                       clip_options=clip_options(args) if hasattr(args, "objects") else None,
+                       preset=getattr(args, "preset", "fast"))
+
+
 def run(args: argparse.Namespace) -> int:
-    import torch
+    from robot_hoi.rl.policy_eval import evaluate_checkpoint
 
-    from robot_hoi.embodiment import load_embodiment
-    from robot_hoi.rl.checkpoint import load_policy
-    from robot_hoi.rl.cli import PRESETS
-    from robot_hoi.rl.config import load_train_config
-    from robot_hoi.rl.models import ActorCritic
-    from robot_hoi.sim.device import resolve_env_cfg
-    from robot_hoi.tasks.interaction import factory
-    from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg
-    from robot_hoi.utils.config import load_dataclass, load_yaml_dataclass
+    record = evaluate_checkpoint(request_from_args(args, args.checkpoint))
+    record["label"] = args.label or record["checkpoint"]
+    record["table"] = args.table
+    if args.out:
+        from deploy.atomic import atomic_write_text
 
-    if args.checkpoint == "untrained":
-        env_cfg = load_yaml_dataclass(InteractionEnvCfg, TASK_CONFIG)
-        sources = factory.expand_sources(args.data)
-        options = clip_options(args)
-        model = ckpt = None
-    else:
-        from robot_hoi.rl.checkpoint import resolve_checkpoint
-
-        ckpt = resolve_checkpoint(args.checkpoint)
-        from robot_hoi.student.checkpoint import is_student_checkpoint
-
-        if is_student_checkpoint(ckpt):
-            from robot_hoi.student.eval_checkpoint import run_student_eval
-
-            return run_student_eval(args, ckpt)
-        model, _, _ = load_policy(ckpt)
-        task = factory.read_task(ckpt) if args.data is None else None
-        env_cfg = load_dataclass(InteractionEnvCfg, task["env"], f"{ckpt} task") if task else \
-            load_yaml_dataclass(InteractionEnvCfg, TASK_CONFIG)
-        sources = task["sources"] if task else factory.expand_sources(args.data)
-        options = clip_options(args, task.get("clip_options") if task else None)
-    embodiment = load_embodiment(args.embodiment)
-    evaluation_settings(env_cfg, args.episodes, args.seed)
-    env_cfg = apply_env_overrides(env_cfg, args.overrides)  # after: `--set` may evaluate under other settings
-    env_cfg = resolve_env_cfg(env_cfg)  # once: every clip's env on the same device, the model moved there
-
-    results = {}
-    for source in sources:
-        clip = factory.load_source(source, options)
-        cache = ckpt.parent / "references" if ckpt is not None and (ckpt.parent / "references").is_dir() else None
-        env = factory.make_env([clip], env_cfg, embodiment, cache=cache)
-        if model is None:
-            torch.manual_seed(args.seed)
-            train_cfg = load_train_config(PRESETS[args.preset])
-            model = ActorCritic(env.obs_dims["policy"], env.obs_dims["critic"], env.num_actions, train_cfg.model)
-            model.eval()
-        results[clip.name] = evaluate(env, model.to(env.device))
-    summary = summarise(results)
+        Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+        atomic_write_text(Path(args.out), json.dumps(record, indent=1) + "\n")
     if args.json:
-        print(json.dumps({"checkpoint": str(ckpt or args.checkpoint), "clips": results, "mean": summary}, indent=2))
+        print(json.dumps(record, indent=1))
     else:
-        _print_table(str(ckpt or args.checkpoint), results, summary)
+        print_record(record)
+        if args.out:
+            print(f"wrote {args.out}")
     return 0
 
 
-def apply_env_overrides(env_cfg, overrides: list[str]):
-    """`--set` values for the environment: "env.key=value" or "key=value" (InteractionEnvCfg keys)."""
-    from robot_hoi.utils.config import apply_overrides
-
-    items = [o[len("env."):] if o.startswith("env.") else o for o in overrides]
-    return apply_overrides(env_cfg, items, "--set") if items else env_cfg
+def _rate(r: dict) -> str:
+    return f"{r['rate']:.2f} [{r['lo']:.2f}, {r['hi']:.2f}]"
 
 
-def evaluation_settings(env_cfg, episodes: int, seed: int) -> None:
-    """Turn a training env config into the evaluation one (in place): `episodes` stand starts, no noise, no PSI,
-    no assist wrenches, no domain randomisation (the clip's own object)."""
-    from robot_hoi.tasks.interaction.env_cfg import RandomizationCfg
-
-    env_cfg.num_envs = episodes
-    env_cfg.seed = seed
-    env_cfg.init.stand_start_probability = 1.0
-    env_cfg.init.spawn_noise_xy = 0.0
-    env_cfg.psi.enabled = False
-    env_cfg.assist.enabled = False  # a training curriculum: never in evaluation
-    env_cfg.randomization = RandomizationCfg()
+def _mean(m: dict, fmt: str = ".1f") -> str:
+    if m["lo"] is None:
+        return format(m["mean"], fmt)
+    return f"{m['mean']:{fmt}} [{m['lo']:{fmt}}, {m['hi']:{fmt}}]"
 
 
-def evaluate(env, model, stochastic: bool = False) -> dict[str, float]:
-    """Run each env until its first episode ends; average InterMimic's metrics over those episodes.
-
-    Actions are the policy mean, or samples of the policy's Gaussian with `stochastic` (seed torch first). The
-    model runs where its parameters are, the env where its physics is: observations and actions cross over."""
-    import torch
-
-    from robot_hoi.sim.device import module_device
-
-    policy_device = module_device(model, env.device)
-    obs = env.reset()
-    finished: dict[str, list[torch.Tensor]] = {}
-    counted = torch.zeros(env.num_envs, dtype=torch.bool, device=env.device)
-    returns = torch.zeros(env.num_envs, device=env.device)
-    with torch.no_grad():
-        for _ in range(env.max_episode_length + env.cfg.warmup_frames + 2):
-            policy_obs = obs["policy"].to(policy_device)
-            actions = model.act(policy_obs) if stochastic else model.act_inference(policy_obs)
-            obs, reward, terminated, truncated, extras = env.step(actions.to(env.device))
-            returns += torch.where(counted, 0.0, reward)
-            done = terminated | truncated
-            new = done & ~counted
-            if new.any():
-                keep = new[done]  # rows of extras["episode"] that belong to first episodes
-                for key, value in extras["episode"].items():
-                    finished.setdefault(key, []).append(value[keep])
-                counted |= new
-            if counted.all():
-                break
-    stats = {k: torch.cat(v) for k, v in finished.items()}
-    return {
-        "episodes": int(counted.sum()),
-        "success_rate": stats["success"].mean().item(),
-        # success that also tracked the object and body (env_cfg success_max_*): a policy that reaches the clip's
-        # end without doing the interaction has success but not this
-        "interaction_success_rate": stats["interaction_success"].mean().item(),
-        "duration_s": stats["duration_s"].mean().item(),
-        "E_h_cm": stats["E_h_cm"].mean().item(),
-        "E_o_cm": stats["E_o_cm"].mean().item(),
-        "E_o_max_cm": stats["E_o_max_cm"].mean().item(),
-        "return": returns[counted].mean().item(),
-        # share of the episodes each termination ended (several can fire on one step; none: the clip's end)
-        "ended_by": {k.split("/", 1)[1]: v.mean().item() for k, v in stats.items() if k.startswith("ended_by/")},
-        "clip_duration_s": env.total_frames / env.references[0].fps,
-        # how executable the reference is (robot_hoi.retarget.feasibility), when the env knows
-        "reference_feasibility": (getattr(env, "reference_feasibility", None) or [None])[0],
-    }
-
-
-SUMMARY_METRICS = ("success_rate", "interaction_success_rate", "duration_s", "E_h_cm", "E_o_cm", "E_o_max_cm", "return")
-
-
-def summarise(results: dict[str, dict[str, float]]) -> dict[str, float]:
-    """Mean over clips of each per-clip metric (teachers and students alike)."""
-    return {k: sum(r[k] for r in results.values()) / max(len(results), 1) for k in SUMMARY_METRICS}
-
-
-def _print_table(name: str, results, summary) -> None:
+def print_record(record: dict) -> None:
     from rich.table import Table
 
     from robot_hoi.utils.console import table_console
 
-    table = Table()
-    for col in ("clip", "episodes", "success", "interaction", "duration (s)", "E_h (cm)", "E_o (cm)", "E_o max"):
-        table.add_column(col, justify="right" if col != "clip" else "left")
-    for clip, r in results.items():
-        table.add_row(clip, str(r["episodes"]), f"{r['success_rate']:.2f}", f"{r['interaction_success_rate']:.2f}",
-                      f"{r['duration_s']:.2f} / {r['clip_duration_s']:.2f}", f"{r['E_h_cm']:.1f}",
-                      f"{r['E_o_cm']:.1f}", f"{r['E_o_max_cm']:.1f}")
-    table.add_row("mean", "", f"{summary['success_rate']:.2f}", f"{summary['interaction_success_rate']:.2f}",
-                  f"{summary['duration_s']:.2f}", f"{summary['E_h_cm']:.1f}", f"{summary['E_o_cm']:.1f}",
-                  f"{summary['E_o_max_cm']:.1f}")
     console = table_console()
-    # the heading on its own line: a table title wraps at the table's width, splitting long checkpoint paths
-    console.print(f"robot-hoi eval: {name}", markup=False, highlight=False)
-    console.print(table)
-    for clip, r in results.items():
-        ended = ", ".join(f"{k} {v:.2f}" for k, v in sorted(r["ended_by"].items(), key=lambda kv: -kv[1]) if v > 0)
-        print(f"{clip}: episodes ended by {ended or 'the clip end (no termination)'}")
+    sections = [("", record["clips"], record["overall"])]
+    if "distilled" in record:
+        sections.append((" (its distilled reference)", record["distilled"]["clips"], record["distilled"]["overall"]))
+    for suffix, clips, overall in sections:
+        table = Table()
+        for col in ("clip", "definition", "success (95 %)", "interaction", "duration s (95 %)", "of clip", "E_h cm",
+                    "E_o cm", "E_o max"):
+            table.add_column(col, justify="left" if col in ("clip", "definition") else "right")
+        rows = [(name, clip, clip["clip_duration_s"]) for name, clip in clips.items()]
+        if len(clips) > 1:
+            rows.append(("all clips", overall, None))
+        for name, clip, clip_s in rows:
+            for definition in evaluation.DEFINITIONS:
+                r = clip[definition]
+                duration = _mean(r["duration_s"], ".2f") + (f" / {clip_s:.2f}" if clip_s else "")
+                table.add_row(name if definition == "ours" else "", definition, _rate(r["success"]),
+                              _rate(r["interaction_success"]) if definition == "ours" else "-", duration,
+                              f"{100 * r['duration_share']['mean']:.0f} %", _mean(r["E_h_cm"]), _mean(r["E_o_cm"]),
+                              f"{r['E_o_max_cm']['mean']:.1f}")
+        # the heading on its own line: a table title wraps at the table's width, splitting long checkpoint paths
+        console.print(f"robot-hoi eval{suffix}: {record['checkpoint']}", markup=False, highlight=False)
+        console.print(table)
+        for name, clip in clips.items():
+            for definition in evaluation.DEFINITIONS:
+                ended = ", ".join(f"{k} {v:.2f}" for k, v in clip[definition]["ended_by"].items())
+                print(f"{name} ({definition}): episodes ended by {ended}")
+    print(protocol_line(record["protocol"]))
+
+
+def protocol_line(protocol: dict) -> str:
+    line = (f"protocol {protocol['name']}: {protocol['episodes_per_clip']} episodes per clip, seed {protocol['seed']} "
+            f"(model selection in training used seeds from {protocol['validation_seed']})")
+    if protocol["deterministic"]:
+        line += "; every start is the same: the episodes are one trajectory, a sample of one"
+    return line

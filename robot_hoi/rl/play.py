@@ -52,7 +52,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _env_for(clip_source: str, env_cfg, embodiment, args, recorded_options=None, cache=None):
-    from robot_hoi.rl.eval_cli import evaluation_settings
+    from robot_hoi.rl.evaluation import evaluation_settings
     from robot_hoi.tasks.interaction import factory
 
     evaluation_settings(env_cfg, 1, args.seed)

@@ -15,7 +15,6 @@ Group folder (beside the runner's checkpoints and logs):
 
 from __future__ import annotations
 
-import copy
 import json
 import math
 import os
@@ -102,8 +101,8 @@ def train_teacher_group(job: TeacherJob, clips: list | None = None, log=print,
 
     from robot_hoi.embodiment import load_embodiment
     from robot_hoi.rl.checkpoint import BEST_CHECKPOINT, load_model_state, read_checkpoint
-    from robot_hoi.rl.eval_cli import summarise
     from robot_hoi.rl.eval_curve import EVAL_CURVE_FILE
+    from robot_hoi.rl.evaluation import VALIDATION_SEED, summarise
     from robot_hoi.rl.runner import OnPolicyRunner
     from robot_hoi.sim.device import check_gpu_memory, policy_device, resolve_env_cfg
     from robot_hoi.tasks.interaction import factory
@@ -139,11 +138,13 @@ def train_teacher_group(job: TeacherJob, clips: list | None = None, log=print,
     runner = OnPolicyRunner(env, job.train_cfg, run_dir, device=policy_device(job.device, env.device))
     runner.on_checkpoint = on_checkpoint
     if job.train_cfg.runner.eval_interval:
-        # the eval protocol with the training's stand spawn noise, so a policy that completes the clip only from the
-        # exact stand does not win; envs built once and re-seeded: every checkpoint meets the same starts
-        noisy = evaluation_envs(clips, env_cfg, embodiment, run_dir / "references", job.train_cfg.runner.eval_episodes,
-                                job.eval_seed, spawn_noise_xy=env_cfg.init.spawn_noise_xy)
-        runner.evaluator = lambda model: summarise(evaluate_envs(noisy, model, job.eval_seed))
+        # model selection: the randomized protocol on validation seeds, disjoint from `robot-hoi eval`'s, so the
+        # score eval reports is not the one model_best.pt was picked on; envs built once and re-seeded: every
+        # checkpoint meets the same starts
+        validation_seed = VALIDATION_SEED + job.eval_seed
+        validation = evaluation_envs(clips, env_cfg, embodiment, run_dir / "references",
+                                     job.train_cfg.runner.eval_episodes, validation_seed)
+        runner.evaluator = lambda model: summarise(evaluate_envs(validation, model, validation_seed))
         runner.on_evaluation = lambda row: log(
             f"[{job.group}] eval at it {row['step']} ({row['train_time_s'] / 60:.1f} min): success "
             f"{row['success_rate']:.2f}, duration {row['duration_s']:.2f} s, E_h {row['E_h_cm']:.1f} cm, E_o "
@@ -178,7 +179,7 @@ def train_teacher_group(job: TeacherJob, clips: list | None = None, log=print,
     checkpoint = run_dir / f"model_{runner.iteration}.pt"  # learn() always ends with this one
     checkpoint = checkpoint if checkpoint.exists() else latest_checkpoint(run_dir)
 
-    # eval_cli's evaluation (stand starts, policy mean, no noise) in envs of the training env's (resolved) config
+    # robot-hoi eval's default protocol and seeds, in envs of the training env's (resolved) config
     envs = evaluation_envs(clips, env_cfg, embodiment, run_dir / "references", job.eval_episodes, job.eval_seed)
     evaluation = _evaluation_record(evaluate_envs(envs, runner.model.eval(), job.eval_seed), job)
     evaluation.update(group=job.group, checkpoint=checkpoint.name if checkpoint else None,
@@ -209,22 +210,20 @@ def train_teacher_group(job: TeacherJob, clips: list | None = None, log=print,
     }
 
 
-def evaluation_envs(clips: list, env_cfg, embodiment, cache: Path, episodes: int, seed: int,
-                    spawn_noise_xy: float = 0.0) -> dict[str, Any]:
-    """One eval-protocol env per clip (eval_cli.evaluation_settings: stand starts, no noise but the given stand
-    spawn noise), from the training env's (resolved) config: where the model is."""
-    from robot_hoi.rl.eval_cli import evaluation_settings
+def evaluation_envs(clips: list, env_cfg, embodiment, cache: Path, episodes: int, seed: int) -> dict[str, Any]:
+    """One env per clip under the default evaluation protocol (robot_hoi.rl.evaluation), from the training env's
+    (resolved) config: where the model is."""
+    from robot_hoi.rl.evaluation import DEFAULT_PROTOCOL, load_protocol, protocol_env_cfg
     from robot_hoi.tasks.interaction import factory
 
-    cfg = copy.deepcopy(env_cfg)
-    evaluation_settings(cfg, episodes, seed)
-    cfg.init.spawn_noise_xy = spawn_noise_xy
+    cfg = protocol_env_cfg(env_cfg, load_protocol(DEFAULT_PROTOCOL)[1], episodes, seed)
     return {clip.name: factory.make_env([clip], cfg, embodiment, cache=cache) for clip in clips}
 
 
 def evaluate_envs(envs: dict[str, Any], model, seed: int) -> dict[str, dict]:
-    """eval_cli.evaluate on each env, its generator re-seeded first: reused envs give every policy the same starts."""
-    from robot_hoi.rl.eval_cli import evaluate
+    """evaluation.evaluate on each env, its generator re-seeded first: reused envs give every policy the same
+    starts."""
+    from robot_hoi.rl.evaluation import evaluate
 
     results = {}
     for name, env in envs.items():
@@ -234,9 +233,10 @@ def evaluate_envs(envs: dict[str, Any], model, seed: int) -> dict[str, dict]:
 
 
 def _evaluation_record(results: dict[str, dict], job: TeacherJob) -> dict[str, Any]:
-    from robot_hoi.rl.eval_cli import summarise
+    from robot_hoi.rl.evaluation import DEFAULT_PROTOCOL, summarise
 
-    return {"episodes_per_clip": job.eval_episodes, "seed": job.eval_seed, "clips": results,
+    return {"protocol": DEFAULT_PROTOCOL, "episodes_per_clip": job.eval_episodes, "seed": job.eval_seed,
+            "clips": results,
             "mean": summarise(results)}
 
 

@@ -1,7 +1,7 @@
 """`robot-hoi eval STUDENT_CHECKPOINT`: the teachers' metrics (success, duration, E_h, E_o, return) for a student.
 
-Same protocol as for a teacher (robot_hoi/rl/eval_cli.py): every episode from the stand at the clip start, no spawn
-noise, no PSI, deterministic actions. The student is rebuilt from its checkpoint and the task.json beside it, and
+Same protocol as for a teacher (robot_hoi/rl/evaluation.py): every episode from the stand at the clip start, drawn
+by the evaluation protocol, no PSI, deterministic actions, scored under both success definitions. The student is rebuilt from its checkpoint and the task.json beside it, and
 is evaluated per clip against
   - the MoCap retarget ("mocap"), the reference the teachers were scored on, and
   - its distilled reference ("distilled"), when it trained on one: the reference its export deploys with.
@@ -10,12 +10,10 @@ With --data, the given clips are evaluated against their MoCap retargets only (g
 
 from __future__ import annotations
 
-import argparse
-import json
 from pathlib import Path
 
 from robot_hoi.errors import UserError
-from robot_hoi.rl.eval_cli import summarise
+from robot_hoi.rl.evaluation import EvalProtocol, apply_env_overrides, clip_record, evaluate_definitions
 
 REFERENCES = ("mocap", "distilled")
 
@@ -37,12 +35,13 @@ def student_providers(groups: list[str], env, cfg, folder: Path) -> dict:
 
 
 def evaluate_student(checkpoint: str | Path, data: list[str] | None = None, episodes: int = 8,
-                     seed: int = 0, overrides: list[str] | None = None) -> dict[str, dict[str, dict[str, float]]]:
-    """results[reference][clip] -> metrics, reference in REFERENCES ("distilled" only where the student had one)."""
+                     seed: int = 0, overrides: list[str] | None = None,
+                     protocol: EvalProtocol | None = None) -> dict[str, dict[str, dict]]:
+    """results[reference][clip] -> the clip's evaluation record (robot_hoi.rl.evaluation.clip_record), reference in
+    REFERENCES ("distilled" only where the student had one). `protocol` None: the one deterministic stand."""
     from robot_hoi.embodiment import load_embodiment
-    from robot_hoi.rl.eval_cli import apply_env_overrides
     from robot_hoi.student.checkpoint import load_student
-    from robot_hoi.student.evaluation import evaluate_groups
+    from robot_hoi.student.evaluation import GroupsAsPolicy
     from robot_hoi.student.student_env import StudentEnv
     from robot_hoi.student.task import (
         evaluation_cfg,
@@ -65,7 +64,8 @@ def evaluate_student(checkpoint: str | Path, data: list[str] | None = None, epis
     model, cfg, stored = load_student(checkpoint)
     task = read_student_task(checkpoint)
     folder = task_folder(checkpoint)
-    env_cfg = evaluation_cfg(load_dataclass(InteractionEnvCfg, task["env"], f"{folder}/task.json"), episodes, seed)
+    env_cfg = evaluation_cfg(load_dataclass(InteractionEnvCfg, task["env"], f"{folder}/task.json"), episodes, seed,
+                             protocol)
     env_cfg = apply_env_overrides(env_cfg, overrides or [])  # after: `--set` may evaluate under other settings
     groups = list(cfg.runner.actor_obs_groups)
     cases: list[tuple[str, object, object]] = []  # (reference kind, clip, reference motion)
@@ -97,39 +97,6 @@ def evaluate_student(checkpoint: str | Path, data: list[str] | None = None, epis
         if width != model.num_actor_obs:
             raise UserError(f"{checkpoint}: the student expects {model.num_actor_obs} observations, clip "
                             f"{clip.name} gives {width}")
-        results.setdefault(kind, {})[clip.name] = evaluate_groups(wrapped, model, groups)
+        results.setdefault(kind, {})[clip.name] = clip_record(
+            evaluate_definitions(GroupsAsPolicy(wrapped, groups), model, seed))
     return results
-
-
-def run_student_eval(args: argparse.Namespace, checkpoint: Path) -> int:
-    results = evaluate_student(checkpoint, args.data, args.episodes, args.seed, args.overrides)
-    report = {"checkpoint": str(args.checkpoint), "policy_kind": "student",
-              "clips": results["mocap"], "mean": summarise(results["mocap"])}
-    if "distilled" in results:
-        report["distilled"] = {"clips": results["distilled"], "mean": summarise(results["distilled"])}
-    if args.json:
-        print(json.dumps(report, indent=2))
-        return 0
-    from robot_hoi.utils.console import table_console
-
-    console = table_console()
-    for kind, label in (("mocap", "MoCap reference"), ("distilled", "its distilled reference")):
-        if kind in results:
-            # the heading on its own line, as the teacher's table (robot_hoi/rl/eval_cli.py)
-            console.print(f"robot-hoi eval (student, {label}): {args.checkpoint}", markup=False, highlight=False)
-            console.print(results_table(results[kind]))
-    return 0
-
-
-def results_table(results: dict[str, dict[str, float]]):
-    from rich.table import Table
-
-    table = Table()
-    for col in ("clip", "episodes", "success", "interaction", "duration (s)", "E_h (cm)", "E_o (cm)", "return"):
-        table.add_column(col, justify="left" if col == "clip" else "right")
-    rows = [*results.items(), ("mean", {"episodes": "", **summarise(results)})]
-    for clip, r in rows:
-        duration = f"{r['duration_s']:.2f}" + (f" / {r['clip_duration_s']:.2f}" if "clip_duration_s" in r else "")
-        table.add_row(clip, str(r["episodes"]), f"{r['success_rate']:.2f}", f"{r['interaction_success_rate']:.2f}",
-                      duration, f"{r['E_h_cm']:.1f}", f"{r['E_o_cm']:.1f}", f"{r['return']:.1f}")
-    return table

@@ -9,7 +9,7 @@ import torch
 from torch import Tensor
 
 from robot_hoi.rl.env import concat_groups
-from robot_hoi.rl.eval_cli import evaluate
+from robot_hoi.rl.evaluation import evaluate
 
 
 class GroupsAsPolicy:

@@ -20,13 +20,12 @@ TASK_FILE = factory.TASK_FILE
 STUDENT_GROUP = "student"
 
 
-def evaluation_cfg(env_cfg: InteractionEnvCfg, num_envs: int, seed: int = 0) -> InteractionEnvCfg:
-    """As `robot-hoi eval`: every episode from the stand at the clip start, no spawn noise, no PSI, no assist."""
-    from robot_hoi.rl.eval_cli import evaluation_settings
+def evaluation_cfg(env_cfg: InteractionEnvCfg, num_envs: int, seed: int = 0, protocol=None) -> InteractionEnvCfg:
+    """As `robot-hoi eval`: every episode from the stand at the clip start drawn by `protocol` (None: the one
+    deterministic stand), no PSI, no assist."""
+    from robot_hoi.rl.evaluation import protocol_env_cfg
 
-    cfg = copy.deepcopy(env_cfg)
-    evaluation_settings(cfg, num_envs, seed)
-    return cfg
+    return protocol_env_cfg(env_cfg, protocol, num_envs, seed)
 
 
 def student_env_cfg(env_cfg: InteractionEnvCfg) -> InteractionEnvCfg:

@@ -102,7 +102,7 @@ def test_object_line_widens_with_the_level_and_tightens_as_it_anneals(scene):
 
 
 def test_evaluation_never_assists():
-    from robot_hoi.rl.eval_cli import evaluation_settings
+    from robot_hoi.rl.evaluation import evaluation_settings
 
     cfg = InteractionEnvCfg()
     cfg.assist.enabled = True
@@ -111,7 +111,7 @@ def test_evaluation_never_assists():
 
 
 def test_evaluation_uses_the_clips_object_unless_set_otherwise():
-    from robot_hoi.rl.eval_cli import apply_env_overrides, evaluation_settings
+    from robot_hoi.rl.evaluation import apply_env_overrides, evaluation_settings
 
     cfg = InteractionEnvCfg()
     cfg.randomization.object_mass_scale = (0.5, 2.0)  # as trained

@@ -8,7 +8,7 @@ import torch
 
 def _env(settle_frames: int, stand: float):
     from robot_hoi.embodiment import load_embodiment
-    from robot_hoi.rl.eval_cli import TASK_CONFIG
+    from robot_hoi.paths import TASK_CONFIG
     from robot_hoi.tasks.interaction import factory
     from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg
     from robot_hoi.utils.config import load_yaml_dataclass

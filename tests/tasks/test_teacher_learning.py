@@ -21,7 +21,7 @@ from robot_hoi.data.synth import default_clip
 from robot_hoi.embodiment import load_embodiment
 from robot_hoi.rl.budget import Budget
 from robot_hoi.rl.config import FAST_PPO_CONFIG, load_train_config
-from robot_hoi.rl.eval_cli import evaluate
+from robot_hoi.rl.evaluation import evaluate
 from robot_hoi.rl.models import ActorCritic
 from robot_hoi.rl.runner import OnPolicyRunner
 from robot_hoi.tasks.interaction import factory

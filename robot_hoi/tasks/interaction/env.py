@@ -30,7 +30,14 @@ from robot_hoi.tasks.interaction.reference import (
 )
 from robot_hoi.tasks.interaction.scene_setup import InteractionScene
 from robot_hoi.utils.timing import OFF
-from robot_hoi.utils.torch_rot import quat_apply, quat_apply_inverse, quat_mul, quat_to_matrix, yaw_quat
+from robot_hoi.utils.torch_rot import (
+    quat_apply,
+    quat_apply_inverse,
+    quat_from_yaw,
+    quat_mul,
+    quat_to_matrix,
+    yaw_quat,
+)
 
 
 @dataclass
@@ -339,6 +346,11 @@ class InteractionEnv:
         idx = torch.minimum(self.ref_index + k, self._clip_end()) if k else self.ref_index
         return reference_frame(self, idx)
 
+    def set_terminations(self, thresholds: termination.Thresholds) -> None:
+        """End episodes by these thresholds from the next step on (evaluation scores one rollout protocol under
+        several success definitions)."""
+        self.cfg.terminations = thresholds
+
     def _terminations(self) -> dict[str, Tensor]:
         thresholds = assist_terms.terminations_at(self.cfg.assist, self.cfg.terminations, self.assist_level)
         return term_terms.interaction_terminations(self, thresholds)
@@ -501,18 +513,37 @@ class InteractionEnv:
         return torch.cat([qpos, qvel, obj], dim=1)
 
     def _stand_states(self, frames: Tensor) -> tuple[Tensor, Tensor]:
-        """Default standing robot at the reference root's place and heading, object at its reference pose."""
+        """Default standing robot at the reference root's place and heading, object at its reference pose, each
+        perturbed by the init config's stand-start draws (a draw is made only where its size is > 0, so adding a
+        draw leaves the random stream of configs without it unchanged)."""
         n = frames.numel()
         lay = self.layout
+        init = self.cfg.init
         qpos = self._default_robot_qpos.repeat(n, 1)
         ref_root = self.ref_robot_qpos[frames]
-        noise = self.cfg.init.spawn_noise_xy * (2 * torch.rand(n, 2, generator=self.generator, device=self.device) - 1)
-        qpos[:, 0:2] = ref_root[:, 0:2] + noise
-        qpos[:, 3:7] = quat_mul(yaw_quat(ref_root[:, 3:7]), qpos[:, 3:7])
+        qpos[:, 0:2] = ref_root[:, 0:2] + self._uniform(n, 2, init.spawn_noise_xy)
+        heading = yaw_quat(ref_root[:, 3:7])
+        if init.spawn_noise_yaw > 0:
+            heading = quat_mul(quat_from_yaw(self._uniform(n, 1, init.spawn_noise_yaw)[:, 0]), heading)
+        qpos[:, 3:7] = quat_mul(heading, qpos[:, 3:7])
+        if init.stand_joint_noise > 0:
+            noisy = self._rsi_noise_qpos
+            qpos[:, noisy] += init.stand_joint_noise * torch.randn(n, len(noisy), generator=self.generator,
+                                                                   device=self.device)
         robot = torch.cat([qpos, torch.zeros(n, lay.robot_nv, device=self.device)], dim=1)
-        obj = torch.cat([self.ref_object_pos[frames], self.ref_object_quat[frames],
-                         torch.zeros(n, 6, device=self.device)], dim=1)
+        obj_pos, obj_quat = self.ref_object_pos[frames].clone(), self.ref_object_quat[frames]
+        if init.object_noise_xy > 0:
+            obj_pos[:, 0:2] += self._uniform(n, 2, init.object_noise_xy)
+        if init.object_noise_yaw > 0:  # about the vertical through the object's origin: a floor object stays put
+            obj_quat = quat_mul(quat_from_yaw(self._uniform(n, 1, init.object_noise_yaw)[:, 0]), obj_quat)
+        obj = torch.cat([obj_pos, obj_quat, torch.zeros(n, 6, device=self.device)], dim=1)
         return robot, obj
+
+    def _uniform(self, n: int, dims: int, half_width: float) -> Tensor:
+        """Uniform draws in [-half_width, half_width] from the env's generator (none made at width 0)."""
+        if half_width <= 0:
+            return torch.zeros(n, dims, device=self.device)
+        return half_width * (2 * torch.rand(n, dims, generator=self.generator, device=self.device) - 1)
 
     def current_states(self) -> Tensor:
         """Robot + object states of every env, in the PSI buffer layout."""

@@ -46,7 +46,12 @@ class PsiCfg:
 @dataclass
 class InitCfg:
     stand_start_probability: float = 0.3   # start at clip frame 0 from the default stand (with warmup)
-    spawn_noise_xy: float = 0.05           # m, stand start placement noise
+    spawn_noise_xy: float = 0.05           # m, stand start placement noise (uniform +-)
+    # Further stand-start draws (0: off, no draw made). Evaluation's randomized protocol (configs/eval/) sets them.
+    spawn_noise_yaw: float = 0.0           # rad, uniform +- on the stand's heading
+    stand_joint_noise: float = 0.0         # rad, normal std on the stand's actuated body joints
+    object_noise_xy: float = 0.0           # m, uniform +- on the object's start position
+    object_noise_yaw: float = 0.0          # rad, uniform +- on the object's start heading (about world z)
     joint_noise: float = 0.05              # rad, reference-state initialisation noise
     start_range: tuple[float, float] = (0.0, 1.0)  # clip fraction from which reference starts are drawn
     # Failure-weighted starts: reference starts drawn per clip segment in proportion to (1 + terminations seen in
