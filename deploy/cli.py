@@ -142,9 +142,11 @@ def handler(args: argparse.Namespace) -> int:
         except Exception as exc:
             if getattr(exc, "user_error", False):
                 raise  # one line and exit 2, printed by the entry point
+            import contextlib
             import traceback
 
-            traceback.print_exc()
+            with contextlib.suppress(OSError):  # stderr may be a terminal that is gone
+                traceback.print_exc()
             return 70  # deploy.outcome.Outcome.CRASHED; summary.json (if the run had started) says more
     mode = "dry run" if options.dry_run else "robot"
     try:  # after SIGHUP the terminal may be gone; summary.json is already written

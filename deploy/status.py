@@ -79,7 +79,10 @@ class RichStatus(NullStatus):
         self.live.update(text, refresh=True)
 
     def close(self) -> None:
-        self.live.stop()
+        try:
+            self.live.stop()
+        except Exception:  # the terminal is gone (EIO after SIGHUP): nothing left to tidy on it
+            pass
 
 
 def make_status_view(mode: str = "auto", stream: TextIO | None = None):

@@ -393,3 +393,71 @@ def test_a_frozen_runtime_is_damped_by_the_watchdog_process_and_then_faults(dev_
         assert is_damping(robot.last_command)
     finally:
         cleanup()
+
+
+# ------------------------------------------------------------------ 5. a terminal that is gone costs the status line, nothing else
+class DeadTerminal(io.StringIO):
+    """stderr of a dropped SSH session: every write after the hang-up raises EIO."""
+
+    def __init__(self):
+        super().__init__()
+        self.gone = False
+
+    def write(self, text):
+        if self.gone:
+            raise OSError(errno.EIO, "Input/output error")
+        return super().write(text)
+
+    def isatty(self):
+        return False
+
+
+def test_sighup_with_a_dead_terminal_damps_fully_and_exits_129(dev_policy):
+    import signal
+
+    from deploy.status import PlainStatus
+
+    rig = RuntimeRig(dev_policy, safety=SafetyConfig(**{**FAST, "damp_s": 1.0}))
+    terminal = DeadTerminal()
+    rig.runtime.status = PlainStatus(terminal, plain_every_s=0.0)
+
+    def ssh_drops():
+        terminal.gone = True
+        rig.runtime.request_signal(signal.SIGHUP)
+
+    rig.runtime.policy = AfterSteps(rig.policy, 20, ssh_drops)
+    summary = rig.runtime.run(duration_s=10.0)
+    assert_ends_damped(rig, summary, "SIGHUP", 129)
+    assert len(damping_commands(rig)) >= 30
+    assert summary["logs"]["status_errors"] > 0
+
+
+def test_sighup_after_the_terminal_closed_exits_129_with_a_summary(dev_policy, tmp_path):
+    """The real thing: stdout and stderr on a pseudo-terminal whose other end closes (the SSH session drops)."""
+    import json
+    import pty
+    import signal
+    import subprocess
+    import sys
+
+    from .conftest import REPO
+    from .test_dryrun import FAST as CLI_FAST
+
+    master, slave = pty.openpty()
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "deploy", "--dry-run", "--policy", str(dev_policy), "--duration", "60",
+         "--log-dir", str(tmp_path), *[a for a in CLI_FAST if a not in ("--status", "plain")], "--damp-s", "1.0"],
+        cwd=REPO, stdin=subprocess.DEVNULL, stdout=slave, stderr=slave, start_new_session=True)
+    os.close(slave)
+    try:
+        events = tmp_path / "events.jsonl"
+        assert wait_until(lambda: events.is_file() and '"to": "POLICY"' in events.read_text(), 60.0)
+        os.set_blocking(master, False)
+        os.close(master)  # the terminal is gone: writes to it now fail with EIO
+        proc.send_signal(signal.SIGHUP)
+        assert proc.wait(timeout=60) == 129
+    finally:
+        proc.kill()
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["outcome"] == "SIGHUP" and summary["final_phase"] == "DAMP"
+    assert summary["phase_time_s"]["DAMP"] >= 0.9
