@@ -27,8 +27,11 @@ if TYPE_CHECKING:
 MODE_MACHINE = {"g1_inspire": 5}
 MODE_MACHINE_NAMES = {4: "G1 23-DoF rev 1.0", 5: "G1 29-DoF rev 1.0", 6: "G1 29-DoF waist locked rev 1.0"}
 
-# Next to the repository's configs when run from a checkout; DEPLOY_CONFIG_DIR overrides (robot without a checkout).
-_REPO_CONFIGS = Path(__file__).resolve().parents[1] / "configs" / "embodiments"
+# The shipped YAMLs: inside the package in an installed wheel (either distribution's setup.py maps them in as
+# deploy/embodiments), else the checkout's configs/embodiments. DEPLOY_CONFIG_DIR is searched first.
+_PACKAGE = Path(__file__).resolve().parent
+_SHIPPED_CONFIGS = (_PACKAGE / "embodiments" if (_PACKAGE / "embodiments").is_dir()
+                    else _PACKAGE.parent / "configs" / "embodiments")
 
 
 @dataclass(frozen=True)
@@ -63,12 +66,12 @@ def embodiment_search_dirs() -> list[Path]:
     dirs = []
     if os.environ.get("DEPLOY_CONFIG_DIR"):
         dirs.append(Path(os.environ["DEPLOY_CONFIG_DIR"]))
-    dirs.append(_REPO_CONFIGS)
+    dirs.append(_SHIPPED_CONFIGS)
     return dirs
 
 
 def resolve_embodiment_path(name_or_path: str | os.PathLike) -> Path:
-    """An existing YAML path as given, else `<name>.yaml` in DEPLOY_CONFIG_DIR or the repository's configs."""
+    """An existing YAML path as given, else `<name>.yaml` in DEPLOY_CONFIG_DIR or the shipped configs."""
     candidate = Path(name_or_path)
     if candidate.suffix in (".yaml", ".yml") or candidate.exists():
         if not candidate.is_file():

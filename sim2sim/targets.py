@@ -39,13 +39,13 @@ class EvalTarget:
 def task_config(contract=None):
     """The interaction task config the policy was trained with: the one its metadata records (contract.task), else
     (files exported before it was recorded) configs/tasks/interaction.yaml."""
-    from robot_hoi.paths import CONFIGS_DIR
+    from robot_hoi.paths import TASK_CONFIG
     from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg
     from robot_hoi.utils.config import load_dataclass, load_yaml_dataclass
 
     if contract is not None and contract.task is not None:
         return load_dataclass(InteractionEnvCfg, contract.task["env"], f"{contract.source} metadata 'task'")
-    return load_yaml_dataclass(InteractionEnvCfg, CONFIGS_DIR / "tasks" / "interaction.yaml")
+    return load_yaml_dataclass(InteractionEnvCfg, TASK_CONFIG)
 
 
 def _clip_extras(clip, num_frames: int, points: int) -> tuple[np.ndarray, np.ndarray]:

@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 
 from robot_hoi.data.cli_options import add_clip_options, clip_options
-from robot_hoi.paths import POLICIES_DIR
+from robot_hoi.paths import EXPORT_DIR
 
 
 def register(subparsers) -> None:
@@ -90,7 +90,7 @@ def run_onnx(args: argparse.Namespace) -> int:
             obs, *_ = env.step(model.act_inference(obs["policy"]))
     recorded_obs = np.concatenate(recorded)[: args.recorded]
 
-    out = Path(args.output) if args.output else POLICIES_DIR / f"{ckpt.parent.parent.name}-{ckpt.parent.name}.onnx"
+    out = Path(args.output) if args.output else EXPORT_DIR / f"{ckpt.parent.parent.name}-{ckpt.parent.name}.onnx"
     metadata = policy_metadata(
         embodiment, build_model(embodiment), policy_kind="teacher", obs_spec=teacher_observation_spec(env),
         keyframes=env_cfg.keyframes, action_clip=env_cfg.action_clip,
@@ -180,7 +180,7 @@ def run_untrained(args: argparse.Namespace) -> int:
                         load_train_config(PRESETS["fast"]).model).eval()
     recorded = record_observations(env, lambda o: model.act_inference(o["student"]), "student", args.recorded)
 
-    out = Path(args.output) if args.output else POLICIES_DIR / "untrained.onnx"
+    out = Path(args.output) if args.output else EXPORT_DIR / "untrained.onnx"
     motion_file = out.with_name(out.stem + ".motion.npz")
     deploy_motion(env.references[0], source=str(motion_file)).save(motion_file)
     metadata = policy_metadata(

@@ -23,8 +23,11 @@ _MAX_DIFF_CHARS = 2_000_000  # a runaway diff (e.g. a committed dataset) must no
 _REQUIRED_KEYS = ("model", "config_json", "dims", "iteration")
 
 
-def git_state(repo: Path = REPO_ROOT) -> dict[str, str]:
-    """Commit hash and uncommitted diff of `repo`; empty strings when git or the repository is unavailable."""
+def git_state(repo: Path | None = REPO_ROOT) -> dict[str, str]:
+    """Commit hash and uncommitted diff of `repo`; empty strings when git or the repository is unavailable (None:
+    an installed wheel, whose site-packages may sit inside some unrelated repository)."""
+    if repo is None:
+        return {"commit": "", "diff": ""}
 
     def run(*args: str) -> str:
         try:

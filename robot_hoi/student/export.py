@@ -12,7 +12,7 @@ import argparse
 from pathlib import Path
 
 from robot_hoi.errors import UserError
-from robot_hoi.paths import POLICIES_DIR
+from robot_hoi.paths import EXPORT_DIR
 
 
 def run_student_export(args: argparse.Namespace, ckpt: Path) -> int:
@@ -59,7 +59,7 @@ def run_student_export(args: argparse.Namespace, ckpt: Path) -> int:
         index = names.index(args.clip)
     recorded = record_observations(env, lambda o: model.act_inference(o["student"]), "student", args.recorded)
 
-    out = Path(args.output) if args.output else POLICIES_DIR / f"{folder.parent.name}-student.onnx"
+    out = Path(args.output) if args.output else EXPORT_DIR / f"{folder.parent.name}-student.onnx"
     motion_file = out.with_name(out.stem + ".motion.npz")
     embodiment = load_embodiment(task["embodiment"])
     mj_model = build_model(embodiment)
