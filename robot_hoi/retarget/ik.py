@@ -47,6 +47,9 @@ _DOFS_PER_JOINT = {
 }
 
 
+IK_SOLVERS = ("dls", "qp")
+
+
 @dataclass(frozen=True)
 class IKSettings:
     iterations: int = 8  # per frame after the first (warm-started)
@@ -67,6 +70,15 @@ class IKSettings:
     foot_roll_weight: float = 0.05  # keeps a foot near the floor from rolling onto its edge
     foot_roll_height: float = 0.08  # m: the roll term fades out as the sole rises to this height
     step_tolerance: float = 1e-6  # stop a frame's iterations once max |dq| falls below this
+    # "dls": this module's damped least squares, then the pipeline's repairs (speed limit, smoothing, push-out
+    # passes); "qp": retarget/qp.py, hard limits and contacts in a QP per step, no repairs afterwards
+    solver: str = "dls"
+
+    def __post_init__(self) -> None:
+        if self.solver not in IK_SOLVERS:
+            from robot_hoi.errors import DataError
+
+            raise DataError(f"the IK solver must be one of {', '.join(IK_SOLVERS)}, not {self.solver!r}")
 
 
 @dataclass

@@ -28,13 +28,22 @@ from robot_hoi.retarget.kinematics import (
 from robot_hoi.retarget.landmarks import landmarks_for
 from robot_hoi.retarget.motion import RobotMotion, finite_difference_qvel
 from robot_hoi.retarget.object_contact import hand_probe_points, subtree
-from robot_hoi.retarget.targets import RobotTargets, TargetMapping, hand_side, link_group, targets_from_clip
+from robot_hoi.retarget.qp import QPRetargeter, QPSettings
+from robot_hoi.retarget.targets import (
+    RobotTargets,
+    TargetMapping,
+    hand_side,
+    link_group,
+    planted,
+    targets_from_clip,
+)
 
 
 @dataclass(frozen=True)
 class RetargetOptions:
     mapping: TargetMapping = field(default_factory=TargetMapping)
-    ik: IKSettings = field(default_factory=IKSettings)
+    ik: IKSettings = field(default_factory=IKSettings)  # ik.solver: "dls" | "qp"
+    qp: QPSettings = field(default_factory=QPSettings)  # the QP retarget's settings (ik.solver "qp")
     grasp: GraspRule = field(default_factory=GraspRule)
     use_landmarks: bool = True  # IK on anatomical landmarks (landmarks.py) instead of the raw link origins
     executable: ExecutableSettings = field(default_factory=ExecutableSettings)  # smoothing + grasp squeeze
@@ -121,15 +130,23 @@ def retarget_targets(
     track = None
     if targets.object_hull is not None:
         track = (targets.object_hull, targets.object_pos, targets.object_quat_wxyz)
-    result = solver.solve(targets.pos, targets.weight, preset, targets.root_quat_wxyz, object_track=track)
-    # legs stay as solved: smoothing them alone would move planted feet (the root keeps its path)
     upper = [n for n in body_joints if not any(k in n for k in ("hip", "knee", "ankle"))]
-    upper_qadr = model.jnt_qposadr[joint_ids(model, upper)]
-    smoothed = smooth_joints(result.qpos, upper_qadr, targets.fps, options.executable)
-    result = _depenetrate(solver, solver.evaluate(smoothed, targets.pos, result.iterations, track), targets, track)
-    limited = result.qpos.copy()  # the push-out may step fast again: the speed limit has the last word
-    limited[:, upper_qadr] = limit_speed(limited[:, upper_qadr], options.executable.max_joint_speed / targets.fps)
-    result = solver.evaluate(limited, targets.pos, result.iterations, track)
+    qp_fallbacks = None
+    if options.ik.solver == "qp":  # hard limits and contacts inside the solve: nothing to repair afterwards
+        qp = QPRetargeter(solver, options.qp)
+        result = qp.solve(targets.pos, targets.weight, targets.fps, preset, targets.root_quat_wxyz, track,
+                          targets.object_points_local, _stance(solver, targets, feet, options.mapping))
+        qp_fallbacks = qp.fallbacks
+    else:
+        result = solver.solve(targets.pos, targets.weight, preset, targets.root_quat_wxyz, object_track=track)
+        # legs stay as solved: smoothing them alone would move planted feet (the root keeps its path)
+        upper_qadr = model.jnt_qposadr[joint_ids(model, upper)]
+        smoothed = smooth_joints(result.qpos, upper_qadr, targets.fps, options.executable)
+        result = _depenetrate(solver, solver.evaluate(smoothed, targets.pos, result.iterations, track), targets,
+                              track)
+        limited = result.qpos.copy()  # the push-out may step fast again: the speed limit has the last word
+        limited[:, upper_qadr] = limit_speed(limited[:, upper_qadr], options.executable.max_joint_speed / targets.fps)
+        result = solver.evaluate(limited, targets.pos, result.iterations, track)
     squeeze = _squeeze(model, cfg, result.qpos, hold, targets.fps, options, solver, track)
     legs = options.executable.compensate_leg_loads
     soles = (solver.sole_body, solver.sole_local) if legs and len(solver.sole_body) else None
@@ -158,12 +175,25 @@ def retarget_targets(
         meta={
             "mapping": asdict(options.mapping),
             "ik": asdict(options.ik),
+            **({"qp": asdict(options.qp), "qp_fallbacks": qp_fallbacks} if qp_fallbacks is not None else {}),
             "grasp": asdict(options.grasp),
             "executable": asdict(options.executable),
             "landmarks": {k: [f, list(off)] for k, (f, off) in landmarks.items()},
         },
     )
     return RetargetResult(motion=motion, targets=targets, ik=result, hold=hold, seconds=seconds)
+
+
+def _stance(solver: IKSolver, targets: RobotTargets, feet: list[str], mapping: TargetMapping) -> dict[int, np.ndarray]:
+    """{foot body: (T,) bool} frames where every foot target on that body is planted (targets.planted)."""
+    names = list(targets.link_names)
+    out: dict[int, np.ndarray] = {}
+    for name in feet:
+        i = names.index(name)
+        down = planted(targets.pos[:, [i]], targets.fps, mapping.pin_height, mapping.pin_speed)[:, 0]
+        body = int(solver.points.body_ids[i])
+        out[body] = out[body] & down if body in out else down
+    return out
 
 
 def _ancestors(model: mujoco.MjModel, bodies: np.ndarray, levels: int) -> np.ndarray:

@@ -143,6 +143,9 @@ class InteractionEnvCfg:
     # m: fingertip targets this far (at most) under an underside of the object move up onto it (retarget
     # TargetMapping.fingertip_underside_reach; None: the retarget's 0, off). Recorded in the cached retarget
     retarget_fingertip_underside_reach: float | None = None
+    # the retarget's IK: "dls" (damped least squares + repairs) | "qp" (constrained QP, retarget/qp.py); None: the
+    # retarget's default. Recorded in the cached retarget
+    retarget_solver: str | None = None
     # what the object collides as: "hull" (its convex hull; checkpoints without the key) | "decomposed" (its convex
     # pieces, ObjectAsset.convex_parts: a hand reaches under a table's top). The retarget keeps the hands out of
     # the same shape; recorded in the cached retarget like leg loads

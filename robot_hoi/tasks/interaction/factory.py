@@ -95,6 +95,7 @@ _RETARGET_SETTINGS = (
     ("retarget_squeeze_depth", ("executable", "squeeze_depth"), "squeeze depth"),
     ("object_collision", ("mapping", "object_collision"), "object collision shape"),
     ("retarget_fingertip_underside_reach", ("mapping", "fingertip_underside_reach"), "fingertip underside reach"),
+    ("retarget_solver", ("ik", "solver"), "IK solver"),
 )
 
 
@@ -102,6 +103,7 @@ def retarget_options(env_cfg: InteractionEnvCfg | None = None):
     """RetargetOptions with the task's retarget settings (the retarget's defaults where the config has none)."""
     from robot_hoi.retarget.executable import check_squeeze_depth, check_squeeze_toward
     from robot_hoi.retarget.hands import check_closure
+    from robot_hoi.retarget.ik import IK_SOLVERS
     from robot_hoi.retarget.pipeline import RetargetOptions
 
     options = RetargetOptions()
@@ -111,6 +113,8 @@ def retarget_options(env_cfg: InteractionEnvCfg | None = None):
         check_squeeze_toward(env_cfg.retarget_squeeze_toward, "env.retarget_squeeze_toward")
     if getattr(env_cfg, "retarget_squeeze_depth", None) is not None:
         check_squeeze_depth(env_cfg.retarget_squeeze_depth, "env.retarget_squeeze_depth")
+    if getattr(env_cfg, "retarget_solver", None) not in (None, *IK_SOLVERS):
+        raise UserError(f"env.retarget_solver must be one of {', '.join(IK_SOLVERS)}, got {env_cfg.retarget_solver!r}")
     for field, (group, name), _ in _RETARGET_SETTINGS:
         value = getattr(env_cfg, field, None) if env_cfg is not None else None
         if value is not None:
