@@ -20,7 +20,6 @@ import torch
 from torch import Tensor
 
 from robot_hoi.errors import UserError
-from robot_hoi.rl.checkpoint import save_checkpoint
 from robot_hoi.rl.logger import LogWriter
 from robot_hoi.rl.normalizer import RunningNormalizer
 from robot_hoi.rl.ppo import PPO
@@ -169,25 +168,13 @@ class DistillationRunner(OnPolicyRunner):
         return super()._log(stats, {**env_logs, **scalars}, collection_s, learning_s)
 
     # --- checkpoints ---------------------------------------------------------------------------------------------
-    def save(self, path: str | Path) -> Path:
-        git = self._git()
+    def save(self, path: str | Path, extra: dict[str, Any] | None = None) -> Path:
+        """The runner's checkpoint contents (OnPolicyRunner.save) plus what only a student has."""
         self.saved_checkpoints.append(Path(path))
-        return save_checkpoint(path, {
+        return super().save(path, (extra or {}) | {
             "policy_kind": POLICY_KIND,
-            "model": self.model.state_dict(),
-            "optimizer": self.alg.optimizer_state(),
-            "iteration": self.iteration,
-            "total_samples": self.total_samples,
-            "total_time_s": self.total_time_s,
-            "config_json": self.cfg.to_json(),
-            "dims": {"actor_obs": self.actor_dim, "critic_obs": self.critic_dim,
-                     "num_actions": self.env.num_actions},
-            "obs_layout": self.obs_layout(),
             "student": {**self.student_info, "token_layout": self.model.layout.to_dict()},
             "sampler_state": {name: obj.state_dict() for name, obj in self.stateful.items()},
-            "git_commit": git["commit"],
-            "git_diff": git["diff"],
-            "torch_rng_state": torch.get_rng_state(),
         })
 
     def load(self, path: str | Path, load_optimizer: bool = False) -> dict[str, Any]:

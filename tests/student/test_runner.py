@@ -135,3 +135,15 @@ def test_teacher_checkpoints_are_refused_where_a_student_is_expected(scene, tmp_
         load_student(tmp_path / "t.pt")
     with pytest.raises(UserError, match="not a student checkpoint"):
         runner.load(tmp_path / "t.pt")
+
+
+def test_student_checkpoints_hold_the_runners_contents_and_take_extras(scene, tmp_path):
+    """One assembly of the checkpoint contents (OnPolicyRunner.save): a student's adds only its own keys, and
+    takes the runner's `extra` (the in-training evaluation saves model_best.pt with one)."""
+    from robot_hoi.rl.runner import OnPolicyRunner
+
+    runner, _, _ = build(scene)
+    data = torch.load(runner.save(tmp_path / "s.pt", extra={"eval": {"success": 1.0}}), weights_only=True)
+    teacher_keys = torch.load(OnPolicyRunner.save(runner, tmp_path / "t.pt"), weights_only=True).keys()
+    assert set(data) == set(teacher_keys) | {"policy_kind", "student", "sampler_state", "eval"}
+    assert data["eval"] == {"success": 1.0} and data["student"]["sources"] == ["test"]
