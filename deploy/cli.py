@@ -13,8 +13,8 @@ EPILOG = """examples:
   robot-hoi deploy --dry-run --policy policies/dev.onnx --hand-bus can --auto-start
   robot-hoi deploy --dry-run --policy P.onnx --hand-bus serial --hand-port /dev/ttyUSB2 /dev/ttyUSB1   (hands bench)
   robot-hoi deploy --policy P.onnx --dds-interface eth0 --hand-port /dev/ttyUSB2 /dev/ttyUSB1 --tracker-port 9870
-operator (real runs): Enter or remote START/A = confirm (stiffen from ZERO_TORQUE; start the policy from HOLD),
-q or remote SELECT = stop, x or remote B = e-stop; Ctrl-C, SIGTERM, SIGHUP = DAMP, summary, exit.
+operator (real runs): Enter or remote L1+A held 0.5 s = confirm (stiffen from ZERO_TORQUE; start the policy from
+HOLD), q or remote SELECT = stop, x or remote B = e-stop; Ctrl-C, SIGTERM, SIGHUP = DAMP, summary, exit.
 exit codes: 0 completed, 1 fault, 2 usage, 3 not started, 4 refused, 5 e-stop, 70 crash, 128+N signal N
 (deploy/README.md)."""
 
@@ -78,6 +78,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                              "for the DDS body) damps the robot (default 0.2; 0 = off)")
     safety.add_argument("--min-hand-rate-share", type=float, default=None, metavar="F",
                         help="hands acknowledging commands below F x the loop rate (over 1 s) -> DAMP (default 0.5)")
+    safety.add_argument("--remote-estop", action="store_true",
+                        help="the wireless remote is the e-stop: no start without it reporting, and silent for "
+                             "--remote-timeout -> DAMP")
+    safety.add_argument("--remote-timeout", dest="remote_timeout_s", type=float, default=None, metavar="S",
+                        help="with --remote-estop: remote silent this long -> DAMP (default 0.5)")
     safety.add_argument("--max-motor-temp", dest="max_motor_temp_c", type=float, default=None, metavar="C",
                         help="a body motor at or above C deg C refuses the start / damps (default 90)")
 
@@ -100,12 +105,13 @@ def options_from_args(args: argparse.Namespace):
 
     safety = SafetyConfig()
     for name in ("zero_torque_s", "ramp_s", "damp_s", "max_input_age_periods", "max_overruns", "max_stall_periods",
-                 "watchdog_s", "min_hand_rate_share", "max_motor_temp_c"):
+                 "watchdog_s", "remote_timeout_s", "min_hand_rate_share", "max_motor_temp_c"):
         value = getattr(args, name)
         if value is not None:
             setattr(safety, name, value)
     if safety.watchdog_s is not None and safety.watchdog_s <= 0:
         safety.watchdog_s = None
+    safety.remote_estop = args.remote_estop
     return DeployOptions(
         policy=args.policy, motion=args.motion, embodiment=args.embodiment, dry_run=args.dry_run,
         hand_bus=args.hand_bus, hand_ports=args.hand_port, hand_ids=args.hand_id, can_channel=args.can_channel,

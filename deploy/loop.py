@@ -5,8 +5,9 @@ next deadline (never `sleep(dt)` after compute), counts overruns (too many withi
 deadlines it has already missed. Each tick's lateness (wake-up - deadline), period (wake-up - previous wake-up)
 and compute time are recorded (deploy.loop_timing).
 
-Stopping: request_stop (operator, duration), request_estop and request_signal all end in DAMP; a second request
-aborts after one damping command. `outcome` (deploy.outcome) says why the run ended.
+Stopping: request_stop (operator, duration), request_estop and request_signal all end in DAMP for damp_s; more
+stops never shorten it, only a second signal aborts after one damping command. `outcome` (deploy.outcome) says
+why the run ended.
 
 A tick, in order:
     1. collect last tick's hand exchange (hands.finish_cycle), read the body state and the tracker poses,
@@ -53,8 +54,8 @@ from deploy.watchdog import NullWatchdog
 
 GATES = (Phase.ZERO_TORQUE, Phase.HOLD)  # the phases that wait for the operator's confirmation
 PROMPTS = {
-    Phase.ZERO_TORQUE: "robot limp (zero torque): press Enter or remote START/A to stiffen and ramp to the default pose",
-    Phase.HOLD: "HOLD reached: press Enter or remote START/A to start the policy",
+    Phase.ZERO_TORQUE: "robot limp (zero torque): press Enter or hold remote L1+A to stiffen and ramp to the default pose",
+    Phase.HOLD: "HOLD reached: press Enter or hold remote L1+A to start the policy",
 }
 HAND_COMMANDING = (Phase.RAMP_TO_DEFAULT, Phase.HOLD, Phase.POLICY)
 
@@ -153,11 +154,11 @@ class Runtime:
         self._confirmed = self.phase in GATES
 
     def request_stop(self, reason: str, kind: str = "operator") -> None:
-        """End the run through DAMP (kind: operator, duration, estop or signal); twice: abort."""
+        """End the run through DAMP (kind: operator, duration, estop or signal); a second one changes nothing."""
         self.stops.request(reason, kind)
 
     def request_estop(self, reason: str = "e-stop") -> None:
-        """DAMP at the next tick, then exit; a second request aborts right after one damping command."""
+        """DAMP at the next tick, then exit after --damp-s (a second one never shortens it)."""
         self.stops.request(reason, "estop")
 
     def request_signal(self, signum: int) -> None:
@@ -199,8 +200,8 @@ class Runtime:
             self.events.log("fault", tick=self.ticks, phase=self.phase.name, reason=reason)
         self._enter(Phase.DAMP, "; ".join(reasons), now)
 
-    def _handle_operator(self, body: BodyState | None) -> None:
-        remote = self.remote.update(body.remote_keys if body is not None else None)
+    def _handle_operator(self, body: BodyState | None, now: float) -> None:
+        remote = self.remote.update(body.remote_keys if body is not None else None, now)
         for source, event in [("operator", e) for e in self.operator.poll()] + [("remote", e) for e in remote]:
             self.events.log("operator", tick=self.ticks, phase=self.phase.name, request=event, source=source)
             if event == "start":
@@ -244,7 +245,7 @@ class Runtime:
         reading = self.hands.finish_cycle(self.safety.hand_wait_fraction * self.dt)
         body = self.body.read_state()
         poses = self.tracker.read()
-        self._handle_operator(body)
+        self._handle_operator(body, now)
         if body is not None and body.is_finite():
             self._last_measured_q = body.q.copy()
         identity, tick_faults = self._health_faults(now, body)

@@ -35,22 +35,26 @@ class Outcome(enum.Enum):
 
 
 class StopRequests:
-    """Stop requests from the loop, another thread or a signal handler. The first one is the reason; a second
-    explicit one (not the duration running out) aborts after one damping command. Kinds: operator, duration,
-    estop, signal. SIGINT is the operator's stop (Ctrl-C); SIGTERM and SIGHUP name themselves in the exit code."""
+    """Stop requests from the loop, another thread or a signal handler. The first one is the reason. Further
+    stops and e-stops (keyboard, remote) never shorten the damping; only a second signal after a first one (Ctrl-C
+    twice) aborts after one damping command. Kinds: operator, duration, estop, signal. SIGINT is the operator's
+    stop (Ctrl-C); SIGTERM and SIGHUP name themselves in the exit code."""
 
     def __init__(self) -> None:
         self.first: tuple[str, str] | None = None  # (kind, reason)
         self.signal_name: str | None = None
+        self._signals = 0
         self._abort = threading.Event()
 
     def request(self, reason: str, kind: str = "operator") -> None:
         if self.first is None:
             self.first = (kind, reason)
-        elif kind != "duration" and self.first[0] != "duration":
-            self._abort.set()
 
     def signal(self, signum: int) -> None:
+        self._signals += 1
+        if self._signals > 1:
+            self._abort.set()
+            return
         self.signal_name = signal.Signals(signum).name
         self.request(self.signal_name, "operator" if signum == signal.SIGINT else "signal")
 

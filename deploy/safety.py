@@ -6,7 +6,7 @@ Phases (an explicit state machine, driven by deploy.loop.Runtime):
     WAIT_STATE       nothing is sent until body, hands (and the tracker, if the policy needs it) report fresh data;
                      a robot of the wrong type (mode_machine) or already unhealthy is refused here
     ZERO_TORQUE      kp = kd = 0 (the robot hangs limp in its gantry) for at least `zero_torque_s`, and until the
-                     operator confirms (keyboard Enter, remote START/A; --auto-start in simulation)
+                     operator confirms (keyboard Enter, remote L1+A held; --auto-start in simulation)
     RAMP_TO_DEFAULT  linear interpolation from the measured pose to default_pose over `ramp_s`, policy gains
     HOLD             default_pose until the operator starts the policy (same keys, or --auto-start)
     POLICY           joint targets from the policy
@@ -67,6 +67,8 @@ class SafetyConfig:
     max_overruns: int | None = 5  # more loop overruns than this within overrun_window_s -> DAMP (None: count only)
     overrun_window_s: float = 1.0
     max_stall_periods: float | None = 2.0  # one tick ending more than this many periods late -> DAMP
+    remote_estop: bool = False  # the wireless remote is the e-stop: it must be reporting to start, and ...
+    remote_timeout_s: float = 0.5  # ... silent this long -> DAMP
     watchdog_s: float | None = 0.2  # loop heartbeat silent this long while commanding: the watchdog damps
     min_hand_rate_share: float | None = 0.5  # acknowledged hand commands per s below this share of the loop rate
     hand_rate_window_s: float = 1.0  # ... over this window -> DAMP (None: report only)
@@ -100,6 +102,7 @@ def input_faults(
         if age > max_age * hands.every_n_ticks:  # the hand's own silence since it was asked, not loop lateness
             faults.append(f"{side} hand state stale ({age * 1e3:.1f} ms without an answer)")
     faults.extend(hands.faults)
+    faults.extend(remote_faults(now, config, body))
     if need_tracker:
         faults.extend(tracker_faults(now, max_age, contract, poses))
         if config.max_tilt_mismatch_rad is not None and body is not None and body.is_finite() \
@@ -108,6 +111,19 @@ def input_faults(
             if tilt > config.max_tilt_mismatch_rad:
                 faults.append(f"IMU and tracker disagree on pelvis tilt by {np.degrees(tilt):.1f} deg")
     return faults
+
+
+def remote_faults(now: float, config: SafetyConfig, body: BodyState | None) -> list[str]:
+    """With the remote as the e-stop, a remote that is not reporting (never, or for remote_timeout_s)."""
+    if not config.remote_estop or body is None:
+        return []
+    if body.remote_stamp is None:
+        return ["no wireless remote reporting (it is the e-stop: --remote-estop)"]
+    silent = now - body.remote_stamp
+    if silent > config.remote_timeout_s:
+        return [f"wireless remote silent for {silent * 1e3:.0f} ms (it is the e-stop; limit "
+                f"{config.remote_timeout_s * 1e3:.0f} ms)"]
+    return []
 
 
 def joint_limit_faults(q: np.ndarray, contract: PolicyContract, margin: float) -> list[str]:

@@ -22,6 +22,7 @@ class BodyState:
     motor_error: np.ndarray | None = None  # (N,) motorstate error bits per joint (0 = healthy)
     motor_temp_c: np.ndarray | None = None  # (N,) hottest temperature sensor of each motor, deg C
     remote_keys: int | None = None  # wireless remote buttons pressed (deploy.remote.BUTTONS bit map)
+    remote_stamp: float | None = None  # clock time the remote last reported (None: no remote seen)
     other_commanders: int = 0  # rt/lowcmd publishers other than us (e.g. sport mode left on)
 
     def is_finite(self) -> bool:

@@ -6,7 +6,8 @@ robot does. It publishes at 100 Hz by default (the robot: 500 Hz) because serial
 message and this robot shares the runtime's process in dry runs. Needs cyclonedds.
 
 What it reports can be changed on demand: `mode_machine`, `tick_frozen`, `motorstate` and `temperature` (per
-motor slot), `remote_keys` (wireless remote buttons), and start_other_commander() adds a second rt/lowcmd writer
+motor slot), `remote_keys` (wireless remote buttons; `remote_connected` False sends a remote's absence: zeros),
+and start_other_commander() adds a second rt/lowcmd writer
 (what sport mode left running looks like).
 """
 
@@ -52,6 +53,7 @@ class DdsLoopbackRobot:
         self.motorstate = np.zeros(num_joints, dtype=np.uint32)
         self.temperature = np.full(num_joints, 40, dtype=np.int16)
         self.remote_keys = 0
+        self.remote_connected = True
         self._other_commander = None
 
     def start(self) -> DdsLoopbackRobot:
@@ -87,7 +89,8 @@ class DdsLoopbackRobot:
             frame.imu_quat_wxyz[:] = state.imu_quat_wxyz
             frame.motorstate[:n] = self.motorstate
             frame.temperature[:n] = self.temperature[:, None]
-            frame.wireless_remote[:] = np.frombuffer(wireless_remote_bytes(self.remote_keys), dtype=np.uint8)
+            frame.wireless_remote[:] = np.frombuffer(wireless_remote_bytes(self.remote_keys, self.remote_connected),
+                                                       dtype=np.uint8)
             frame.with_crc()
             if self.corrupt_state_crc:
                 frame.crc ^= 0x1

@@ -6,8 +6,9 @@ default, or follows `imu_quat_source()` when a simulated world provides the pelv
 the injected clock, so fake-clock tests are exact. Faults can be injected: `freeze()` stops new measurements
 (stale state), `inject_nan()` makes the next reading non-finite. It reports what the G1's LowState reports, each
 settable on demand: `mode_machine` (5, the 29-DoF rev 1.0), `tick` (advances per reading unless `tick_frozen`),
-`motor_error` bits and `motor_temp_c` per joint, `remote_keys` (wireless remote buttons, deploy.remote) and
-`other_commanders` (other rt/lowcmd publishers).
+`motor_error` bits and `motor_temp_c` per joint, `remote_keys` (wireless remote buttons, deploy.remote; its
+reports stop while `remote_connected` is False, and its buttons read as none) and `other_commanders` (other
+rt/lowcmd publishers).
 """
 
 from __future__ import annotations
@@ -56,6 +57,8 @@ class SimulatedBody(Body):
         self.motor_error = np.zeros(num_joints, dtype=np.uint32)
         self.motor_temp_c = np.full(num_joints, 40.0)
         self.remote_keys = 0
+        self.remote_connected = True
+        self._remote_stamp: float | None = None
         self.other_commanders = 0
 
     def connect(self) -> None:
@@ -100,9 +103,13 @@ class SimulatedBody(Body):
         self._integrate(now)
         quat = UPRIGHT_WXYZ.copy() if self.imu_quat_source is None else np.asarray(self.imu_quat_source(), float)
         self.tick += 0 if self.tick_frozen else 1
+        if self.remote_connected:
+            self._remote_stamp = now
         state = BodyState(q=self.q.copy(), dq=self.dq.copy(), imu_quat_wxyz=quat, gyro=np.zeros(3), stamp=now,
                           mode_machine=self.mode_machine, tick=self.tick, motor_error=self.motor_error.copy(),
-                          motor_temp_c=self.motor_temp_c.copy(), remote_keys=self.remote_keys,
+                          motor_temp_c=self.motor_temp_c.copy(),
+                          remote_keys=self.remote_keys if self.remote_connected else 0,
+                          remote_stamp=self._remote_stamp,
                           other_commanders=self.other_commanders)
         if self._nan_next:
             state.q[0] = np.nan

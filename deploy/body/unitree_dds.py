@@ -23,7 +23,7 @@ from deploy.body.base import Body, BodyState
 from deploy.body.unitree_lowlevel import NUM_MOTOR_SLOTS, LowCmdFrame, LowStateFrame, make_lowcmd
 from deploy.clock import Clock, MonotonicClock
 from deploy.errors import BodyLinkError, MissingDependencyError
-from deploy.remote import keys_from_wireless_remote
+from deploy.remote import keys_from_wireless_remote, remote_reporting
 
 log = logging.getLogger(__name__)
 
@@ -221,6 +221,7 @@ class UnitreeDdsBody(Body):
         self.mode_pr = mode_pr
         self.check_state_crc = check_state_crc
         self._latest: BodyState | None = None
+        self._remote_stamp: float | None = None  # when the wireless remote last reported (deploy.remote)
         self._endpoint: DdsEndpoint | None = None
         self._lowcmd_watch = None  # reader of rt/lowcmd that ignores our own writer: counts other commanders
         self.states_received = 0
@@ -256,6 +257,8 @@ class UnitreeDdsBody(Body):
             self.crc_errors += 1
             return
         n = self.num_joints
+        if remote_reporting(frame.wireless_remote):
+            self._remote_stamp = stamp
         self._latest = BodyState(
             q=frame.q[:n].astype(np.float64),
             dq=frame.dq[:n].astype(np.float64),
@@ -268,6 +271,7 @@ class UnitreeDdsBody(Body):
             motor_error=frame.motorstate[:n].copy(),
             motor_temp_c=frame.temperature[:n].max(axis=1).astype(np.float64),
             remote_keys=keys_from_wireless_remote(frame.wireless_remote),
+            remote_stamp=self._remote_stamp,
         )
         self.states_received += 1
 

@@ -95,9 +95,15 @@ def test_body_reports_identity_health_remote_and_other_commanders(loopback):
     assert any("other rt/lowcmd publisher" in f for f in faults)
     assert "motor error: j3 motorstate 0x00000004" in faults
     assert any(f.startswith("motor over temperature: j10 at 95 C") for f in faults)
-    assert state.remote_keys == keys_of("B")
+    assert state.remote_keys == keys_of("B") and state.remote_stamp is not None
     robot.stop_other_commander()
     assert wait_for(lambda: body.read_state().other_commanders == 0)
+
+    robot.remote_connected = False  # the remote stops reporting: its stamp stops advancing, its keys read as none
+    assert wait_for(lambda: body.read_state().remote_keys == 0)
+    silent_since = body.read_state().remote_stamp
+    time.sleep(0.05)
+    assert body.read_state().remote_stamp == silent_since < body.read_state().stamp
 
     robot.tick_frozen = True
     time.sleep(0.05)

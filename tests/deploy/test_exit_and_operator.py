@@ -151,8 +151,8 @@ def test_plain_status_lines_and_prompts(dev_policy):
     assert isinstance(rig.runtime.status, PlainStatus)
     rig.runtime.run(duration_s=3.0)
     text = stream.getvalue()
-    assert ">>> robot limp (zero torque): press Enter or remote START/A to stiffen" in text
-    assert ">>> HOLD reached: press Enter or remote START/A to start the policy" in text
+    assert ">>> robot limp (zero torque): press Enter or hold remote L1+A to stiffen" in text
+    assert ">>> HOLD reached: press Enter or hold remote L1+A to start the policy" in text
     assert "POLICY" in text and "| hands L 30.0 R 30.0 Hz | faults none" in text
 
 

@@ -90,32 +90,35 @@ def test_remote_bytes_and_presses():
     raw = wireless_remote_bytes(keys_of("START", "L2"))
     assert len(raw) == 40 and keys_from_wireless_remote(raw) == keys_of("START", "L2")
     presses = RemotePresses()
-    assert presses.update(keys_of("B")) == []  # held at start-up: the baseline, not a press
-    assert presses.update(keys_of("B")) == []
-    assert presses.update(0) == []
-    assert presses.update(keys_of("START")) == ["start"]
-    assert presses.update(keys_of("START", "A")) == ["start"]  # only A went down
-    assert presses.update(keys_of("SELECT")) == ["stop"]
-    assert presses.update(keys_of("SELECT", "B")) == ["estop"]
+    t = iter(0.1 * i for i in range(100))
+    assert presses.update(keys_of("B"), next(t)) == []  # held at start-up: the baseline, not a press
+    assert presses.update(keys_of("B"), next(t)) == []
+    assert presses.update(0, next(t)) == []
+    assert presses.update(keys_of("START"), next(t)) == []  # no single button starts anything
+    assert presses.update(keys_of("L1", "A"), next(t)) == []  # the chord, just pressed
+    assert presses.update(keys_of("L1", "A"), next(t) + 0.5) == ["start"]  # ... held 0.5 s
+    assert presses.update(keys_of("L1", "A"), next(t) + 0.5) == []  # once per hold
+    assert presses.update(keys_of("SELECT"), next(t) + 0.5) == ["stop"]
+    assert presses.update(keys_of("SELECT", "B"), next(t) + 0.5) == ["estop"]
 
 
-def press(rig, *buttons):
+def press(rig, *buttons, hold_s=0.0):
     rig.body.remote_keys = keys_of(*buttons)
-    rig.step(1)
+    rig.step(1 + round(hold_s / rig.dt) + (hold_s > 0))  # held a tick beyond hold_s
     rig.body.remote_keys = 0
-    rig.step(1)
+    rig.step(2)
 
 
 def test_remote_start_confirms_both_gates(dev_policy):
     rig = RuntimeRig(dev_policy, safety=SafetyConfig(**GATED))
     rig.step(20)
     assert rig.runtime.phase == Phase.ZERO_TORQUE
-    press(rig, "START")
+    press(rig, "L1", "A", hold_s=0.5)
     assert rig.runtime.phase == Phase.RAMP_TO_DEFAULT
     rig.run_until(Phase.HOLD)
     rig.step(10)
     assert rig.runtime.phase == Phase.HOLD
-    press(rig, "A")
+    press(rig, "L1", "A", hold_s=0.5)
     assert rig.runtime.phase == Phase.POLICY
     assert [e["source"] for e in rig.events.of_kind("operator")] == ["remote", "remote"]
 
