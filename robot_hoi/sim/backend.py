@@ -63,20 +63,25 @@ class PhysicsBackend(ABC):
         """Give the environments `env_ids` the prepared masses `levels` (indices into set_body_mass_levels'
         list), from their next step. No host sync where the physics runs on a GPU."""
 
+    # Each backend's __init__ sets these to tensors viewing the physics' own buffers: read without a copy.
+    _qpos_t: Tensor
+    _qvel_t: Tensor
+    _sens_t: Tensor
+
     @property
-    @abstractmethod
     def qpos(self) -> Tensor:
         """(num_envs, nq) view of the current positions (the backend's dtype and device)."""
+        return self._qpos_t
 
     @property
-    @abstractmethod
     def qvel(self) -> Tensor:
         """(num_envs, nv) view of the current velocities."""
+        return self._qvel_t
 
     @property
-    @abstractmethod
     def sensordata(self) -> Tensor:
         """(num_envs, nsensordata) view of the latest sensor readings."""
+        return self._sens_t
 
     def physics_report(self) -> dict[str, float]:
         """Scalars on the physics' health since the last call (overflow flags, buffer use; one host sync), for the

@@ -131,19 +131,6 @@ class MujocoCpuBackend(PhysicsBackend):
         for i, level in zip(env_ids.tolist(), levels.tolist(), strict=True):  # resets only
             self._models[i], self._kin_models[i] = self._mass_levels[level]
 
-    # ---- views ------------------------------------------------------------------------------------------------
-    @property
-    def qpos(self) -> Tensor:
-        return self._qpos_t
-
-    @property
-    def qvel(self) -> Tensor:
-        return self._qvel_t
-
-    @property
-    def sensordata(self) -> Tensor:
-        return self._sens_t
-
 
 def _zero_timestep_copy(model: mujoco.MjModel) -> mujoco.MjModel:
     import copy

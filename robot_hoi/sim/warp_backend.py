@@ -171,18 +171,6 @@ class MujocoWarpBackend(PhysicsBackend):
         kept[ids] = self._sens_t[ids]
         self._sens_t.copy_(kept)
 
-    # ---- views ------------------------------------------------------------------------------------------------
-    @property
-    def qpos(self) -> Tensor:
-        return self._qpos_t
-
-    @property
-    def qvel(self) -> Tensor:
-        return self._qvel_t
-
-    @property
-    def sensordata(self) -> Tensor:
-        return self._sens_t
 
     # ---- health -----------------------------------------------------------------------------------------------
     def physics_report(self) -> dict[str, float]:
