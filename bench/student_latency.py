@@ -74,7 +74,8 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--warmup", type=int, default=200)
     args = parser.parse_args(argv)
 
-    from robot_hoi.export.onnx_export import INPUT_NAME, OUTPUT_NAME, ort_session, to_onnx_bytes
+    from deploy.contract import INPUT_NAME, OUTPUT_NAME
+    from robot_hoi.export.onnx_export import ort_session, to_onnx_bytes
 
     torch.set_num_threads(1)
     policy, obs_dim = build_policy(args)

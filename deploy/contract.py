@@ -66,6 +66,7 @@ from deploy.hand_units import HAND_SIDES, INSPIRE_CHANNELS, HandChannel
 CONTRACT_VERSION = "1"
 POLICY_KINDS = ("teacher", "student", "untrained")
 ACTION_OFFSET_MODES = ("fixed", "reference")
+# The ONNX graph's one input and one output, defined here only: the export names them so, the runtime feeds them.
 INPUT_NAME = "obs"
 OUTPUT_NAME = "actions"
 HAND_DOF = len(INSPIRE_CHANNELS)

@@ -25,7 +25,16 @@ import numpy as np
 
 from deploy import __version__
 from deploy.atomic import atomic_write_bytes
-from deploy.contract import NUM_HAND_ACTUATORS, OBS_TERMS, ObsTermSpec, PolicyContract, ReferenceInfo, _Dims
+from deploy.contract import (
+    INPUT_NAME,
+    NUM_HAND_ACTUATORS,
+    OBS_TERMS,
+    OUTPUT_NAME,
+    ObsTermSpec,
+    PolicyContract,
+    ReferenceInfo,
+    _Dims,
+)
 from deploy.embodiment import EmbodimentConfig, load_embodiment
 from deploy.errors import DeployError
 from deploy.hand_units import HAND_SIDES, channel_arrays, units_to_rad
@@ -216,8 +225,8 @@ def onnx_bytes(
     weights: np.ndarray,
     bias: np.ndarray,
     *,
-    input_name: str = "obs",
-    output_name: str = "actions",
+    input_name: str = INPUT_NAME,
+    output_name: str = OUTPUT_NAME,
 ) -> bytes:
     """A linear ONNX graph `output = input @ W + b` with the given metadata_props (onnx.helper only)."""
     from onnx import TensorProto, helper, numpy_helper

@@ -1,7 +1,7 @@
 """Policy -> ONNX with metadata, verified on the way out.
 
 The graph takes `obs` float32 [batch, obs_dim] and returns `actions` float32 [batch, num_actions] (observation
-normalisation baked in). Verification: onnx.checker, ONNX Runtime vs torch within `tolerance` (max abs) on random
+normalisation baked in; the names are deploy.contract's INPUT_NAME and OUTPUT_NAME). Verification: onnx.checker, ONNX Runtime vs torch within `tolerance` (max abs) on random
 and recorded observations, and ORT latency (batch 1, one thread). The file is written atomically.
 """
 
@@ -20,10 +20,9 @@ import onnx
 import torch
 
 from deploy.atomic import atomic_write_bytes
+from deploy.contract import INPUT_NAME, OUTPUT_NAME
 from robot_hoi.errors import UserError
 
-INPUT_NAME = "obs"
-OUTPUT_NAME = "actions"
 OPSET = 17
 
 

@@ -4,8 +4,9 @@ import numpy as np
 import pytest
 import torch
 
+from deploy.contract import INPUT_NAME, OUTPUT_NAME
 from robot_hoi.errors import UserError
-from robot_hoi.export.onnx_export import INPUT_NAME, OUTPUT_NAME, ort_session, to_onnx_bytes
+from robot_hoi.export.onnx_export import ort_session, to_onnx_bytes
 from robot_hoi.rl.config import ActorCriticConfig, PPOConfig
 from robot_hoi.rl.ppo import PPO
 from robot_hoi.student.config import TransformerConfig
