@@ -101,8 +101,8 @@ class RunnerConfig:
     # fast preset, 3072 samples x 5 epochs): 1 thread 663 ms, 2 threads 409 ms per update.
     update_threads: int | None = None
     # In-training evaluation (0: off): every eval_interval iterations the run's evaluator (robot-hoi train's: the
-    # eval protocol from the stand, with the training's spawn noise) scores the policy mean on eval_episodes
-    # episodes. Eval/* scalars and eval_curve.jsonl record it against training time, and the best so far
+    # randomized evaluation protocol on validation seeds, robot_hoi.rl.evaluation) scores the policy mean on
+    # eval_episodes episodes. Eval/* scalars and eval_curve.jsonl record it against training time, and the best so far
     # (eval_curve.eval_rank: success, then interaction success, then tracked duration) is kept as model_best.pt: the
     # policy `eval`, `export` and distillation take from a run.
     eval_interval: int = 500

@@ -74,16 +74,20 @@ def test_randomized_starts_differ_per_episode_and_replay_from_the_seed(randomize
     assert (a[:, -7:-5] - stand[:, -7:-5]).abs().max() > 0.2 * p.object_xy
 
 
-def _eval(tmp_path, capsys, *extra: str) -> dict:
-    out = tmp_path / "record.json"
+def _eval(folder, *extra: str) -> dict:
+    out = folder / "record.json"
     assert main(["eval", "untrained", "--data", CLIP, "--episodes", "3", "--out", str(out), *extra]) == 0
-    capsys.readouterr()
     return json.loads(out.read_text())
 
 
+@pytest.fixture(scope="module")
+def record(tmp_path_factory):
+    """An untrained policy's record under the default protocol (shared: each evaluation retargets the clip)."""
+    return _eval(tmp_path_factory.mktemp("eval"), "--label", "baseline", "--table", "baselines")
+
+
 @pytest.mark.slow
-def test_eval_reports_both_definitions_with_intervals_and_its_seeds(tmp_path, capsys):
-    record = _eval(tmp_path, capsys, "--label", "baseline")
+def test_eval_reports_both_definitions_with_intervals_and_its_seeds(record, tmp_path):
     (clip,) = record["clips"].values()
     assert record["protocol"]["name"] == "randomized" and record["protocol"]["seed"] == 0
     assert record["protocol"]["validation_seed"] == evaluation.VALIDATION_SEED and record["label"] == "baseline"
@@ -95,16 +99,16 @@ def test_eval_reports_both_definitions_with_intervals_and_its_seeds(tmp_path, ca
         assert sum(r["ended_by"].values()) >= 1.0  # every episode ended by something, the clip's end included
     assert record["overall"]["ours"]["success"]["n"] == 3
     # the stand protocol: one trajectory, said so
-    stand = _eval(tmp_path, capsys, "--protocol", "stand")
+    stand = _eval(tmp_path, "--protocol", "stand")
     durations = stand["clips"][next(iter(stand["clips"]))]["ours"]["per_episode"]["duration_s"]
     assert stand["protocol"]["deterministic"] and len(set(durations)) == 1
 
 
 @pytest.mark.slow
-def test_the_two_definitions_end_episodes_by_their_own_thresholds(tmp_path, capsys):
+def test_the_two_definitions_end_episodes_by_their_own_thresholds(tmp_path):
     """With our object line at 1 mm every episode ends as soon as tracking starts; InterMimic's 0.5 m line lets the
     same starts run on."""
-    record = _eval(tmp_path, capsys, "--set", "env.terminations.max_mean_object_point_error=0.001")
+    record = _eval(tmp_path, "--set", "env.terminations.max_mean_object_point_error=0.001")
     (clip,) = record["clips"].values()
     ours, theirs = clip["ours"], clip["intermimic"]
     assert ours["ended_by"].get("object_deviation") == 1.0
@@ -133,15 +137,14 @@ def test_recipes_separate_only_with_two_seeds_apart_and_disjoint_intervals():
 
 
 @pytest.mark.slow
-def test_results_are_generated_from_records_and_checked(tmp_path, capsys):
+def test_results_are_generated_from_records_and_checked(record, tmp_path):
     data = tmp_path / "data"
     data.mkdir()
-    record = _eval(tmp_path, capsys, "--label", "untrained push", "--table", "baselines")
     (data / "untrained_push.json").write_text(json.dumps(record))
     out = tmp_path / "README.md"
     assert main(["results", "--data", str(data), "--out", str(out)]) == 0
     text = out.read_text()
-    assert "## baselines" in text and '<a id="untrained_push"></a>untrained push' in text
+    assert "## baselines" in text and '<a id="untrained_push"></a>baseline' in text
     assert main(["results", "--data", str(data), "--out", str(out), "--check"]) == 0
     (data / "untrained_push.json").write_text(json.dumps({**record, "label": "renamed"}))
     assert main(["results", "--data", str(data), "--out", str(out), "--check"]) == 1

@@ -85,7 +85,7 @@ def test_skillmimic_run_and_export_refusal(teacher_run, tmp_path, capsys):
     # it evaluates with its frozen history encoder rebuilt from the run folder
     assert main(["eval", str(ckpt), "--episodes", "1", "--json"]) == 0
     report = json.loads(capsys.readouterr().out)
-    assert report["policy_kind"] == "student" and report["clips"]["synth_lift_place_seed0"]["episodes"] == 1
+    assert report["kind"] == "student" and report["clips"]["synth_lift_place_seed0"]["ours"]["episodes"] == 1
 
 
 def test_ablation_run_without_reference_distillation(teacher_run, tmp_path, capsys):
