@@ -52,8 +52,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     hands.add_argument("--hand-retries", type=int, default=2, help="extra tries per bus request (default 2)")
     hands.add_argument("--hand-safe-state", choices=("hold", "open"), default="hold",
                        help="on a fault: hold the last pose (default; a held box is not dropped) or open")
-    hands.add_argument("--hand-force-limit", type=int, default=1000, help="FORCE_SET, grams at the fingertip")
-    hands.add_argument("--hand-speed", type=int, default=1000, help="SPEED_SET 0..1000")
+    hands.add_argument("--hand-force-limit", type=int, default=None,
+                       help="FORCE_SET, g at the fingertip (default and maximum: the embodiment's deploy.hand_force_set)")
+    hands.add_argument("--hand-speed", type=int, default=None,
+                       help="SPEED_SET (default and maximum: the embodiment's deploy.hand_speed_set)")
     body = p.add_argument_group("body and tracker")
     body.add_argument("--body", choices=("sim", "dds"), default=None,
                       help="sim (dry-run default) or dds (robot default; in a dry run: a loopback DDS robot)")

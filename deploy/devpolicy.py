@@ -5,9 +5,9 @@
 writes `policies/dev.onnx` and its sidecar `policies/dev.motion.npz`. The graph is one linear layer,
 `actions = obs @ W + b`. With `--mode follow` (default) W reads the first keyframe of `ref_joint_pos` and scales it
 by 1/action_scale, so joint targets = the reference joint positions: a dry run visibly tracks the motion. With
-`--mode random` W is small seeded noise (an "untrained" policy). Metadata comes from the embodiment YAML; joint
-limits and effort limits, which the YAML does not hold, come from a URDF given with --urdf or from the G1 rev 1.0
-table below (Unitree unitree_ros model). The motion is synthetic (stand, sway, reach, close the hands, a box that
+`--mode random` W is small seeded noise (an "untrained" policy). Metadata comes from the embodiment YAML, joint
+and effort limits and action_clip from its `deploy` section (or, with --urdf, the joint limits from a URDF; the
+runtime refuses what is wider than the YAML's). The motion is synthetic (stand, sway, reach, close the hands, a box that
 rises in front of the robot); its link positions are rough offsets, not forward kinematics.
 This module needs the `onnx` package (a development dependency), unlike the rest of deploy.
 """
@@ -41,25 +41,6 @@ from deploy.hand_units import HAND_SIDES, channel_arrays, units_to_rad
 from deploy.motion import ReferenceMotion, file_sha256
 from deploy.rotations import quat_wxyz_from_axis_angle, yaw_matrix
 
-# G1 29-DoF rev 1.0 (unitree_ros): joint -> (lower rad, upper rad, effort N m). Used when no URDF is given.
-G1_BODY_LIMITS = {
-    "left_hip_pitch_joint": (-2.5307, 2.8798, 88), "left_hip_roll_joint": (-0.5236, 2.9671, 139),
-    "left_hip_yaw_joint": (-2.7576, 2.7576, 88), "left_knee_joint": (-0.0873, 2.8798, 139),
-    "left_ankle_pitch_joint": (-0.8727, 0.5236, 50), "left_ankle_roll_joint": (-0.2618, 0.2618, 50),
-    "right_hip_pitch_joint": (-2.5307, 2.8798, 88), "right_hip_roll_joint": (-2.9671, 0.5236, 139),
-    "right_hip_yaw_joint": (-2.7576, 2.7576, 88), "right_knee_joint": (-0.0873, 2.8798, 139),
-    "right_ankle_pitch_joint": (-0.8727, 0.5236, 50), "right_ankle_roll_joint": (-0.2618, 0.2618, 50),
-    "waist_yaw_joint": (-2.618, 2.618, 88), "waist_roll_joint": (-0.52, 0.52, 50),
-    "waist_pitch_joint": (-0.52, 0.52, 50),
-    "left_shoulder_pitch_joint": (-3.0892, 2.6704, 25), "left_shoulder_roll_joint": (-1.5882, 2.2515, 25),
-    "left_shoulder_yaw_joint": (-2.618, 2.618, 25), "left_elbow_joint": (-1.0472, 2.0944, 25),
-    "left_wrist_roll_joint": (-1.9722, 1.9722, 25), "left_wrist_pitch_joint": (-1.6144, 1.6144, 5),
-    "left_wrist_yaw_joint": (-1.6144, 1.6144, 5),
-    "right_shoulder_pitch_joint": (-3.0892, 2.6704, 25), "right_shoulder_roll_joint": (-2.2515, 1.5882, 25),
-    "right_shoulder_yaw_joint": (-2.618, 2.618, 25), "right_elbow_joint": (-1.0472, 2.0944, 25),
-    "right_wrist_roll_joint": (-1.9722, 1.9722, 25), "right_wrist_pitch_joint": (-1.6144, 1.6144, 5),
-    "right_wrist_yaw_joint": (-1.6144, 1.6144, 5),
-}
 HAND_EFFORT = 1.0  # N m, the Inspire URDF's placeholder; the hands are position-servoed by their own firmware
 
 # Rough standing offsets from the pelvis (m) for synthetic link positions; other links sit at the pelvis.
@@ -95,12 +76,18 @@ def read_urdf_limits(path: str | os.PathLike) -> dict[str, tuple[float, float, f
 
 
 def joint_limits(emb: EmbodimentConfig, urdf: str | os.PathLike | None = None) -> tuple[np.ndarray, ...]:
-    """(lower, upper, effort) per actuator. Hand joints: the span of their open/closed mapping."""
-    table = read_urdf_limits(urdf) if urdf else G1_BODY_LIMITS
+    """(lower, upper, effort) per actuator: the YAML's deploy limits, or with a URDF its limits for the body and
+    the span of the open/closed mapping for the hand joints."""
     hand_span = {}
-    for side in HAND_SIDES:
-        for ch in emb.hands[side]:
-            hand_span[ch.joint] = (min(ch.open_rad, ch.closed_rad), max(ch.open_rad, ch.closed_rad), HAND_EFFORT)
+    if urdf:
+        table = read_urdf_limits(urdf)
+        for side in HAND_SIDES:
+            for ch in emb.hands[side]:
+                hand_span[ch.joint] = (min(ch.open_rad, ch.closed_rad), max(ch.open_rad, ch.closed_rad), HAND_EFFORT)
+    elif emb.limits is not None:
+        table = emb.limits.joints
+    else:
+        raise DeployError(f"{emb.path}: no 'deploy' section with joint limits (or pass --urdf)")
     rows = []
     for name in emb.actuator_names:
         if name in hand_span:
@@ -108,7 +95,7 @@ def joint_limits(emb: EmbodimentConfig, urdf: str | os.PathLike | None = None) -
         elif name in table:
             rows.append(table[name])
         else:
-            source = urdf or "the built-in G1 table"
+            source = urdf or f"{emb.path} deploy.joint_limits"
             raise DeployError(f"{emb.path}: actuator '{name}' has no joint limits in {source}")
     lower, upper, effort = (np.array(col, dtype=np.float64) for col in zip(*rows, strict=True))
     return lower, upper, effort
@@ -122,11 +109,14 @@ def make_contract(
     obs_terms: Sequence[str] | None = None,
     reference: ReferenceInfo | None = None,
     urdf: str | os.PathLike | None = None,
-    action_clip: float = 5.0,
+    action_clip: float | None = None,
     policy_kind: str = "untrained",
 ) -> PolicyContract:
-    """A contract whose metadata comes from the embodiment YAML (+ joint limits)."""
+    """A contract whose metadata comes from the embodiment YAML (+ joint limits); action_clip defaults to the
+    YAML's deploy.action_clip (4 without one)."""
     lower, upper, effort = joint_limits(emb, urdf)
+    if action_clip is None:
+        action_clip = emb.limits.action_clip if emb.limits is not None else 4.0
     link_names = tuple(emb.link_map)
     dims = _Dims(len(emb.actuators), len(emb.actuators) - NUM_HAND_ACTUATORS, len(keyframes), len(link_names))
     names = list(obs_terms) if obs_terms is not None else list(OBS_TERMS)
@@ -297,7 +287,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--duration", type=float, default=4.0, help="synthetic motion length, s")
     parser.add_argument("--no-reference", action="store_true", help="write no motion sidecar (reference: null)")
-    parser.add_argument("--urdf", default=None, help="read joint limits from this URDF instead of the G1 table")
+    parser.add_argument("--urdf", default=None, help="read joint limits from this URDF instead of the embodiment YAML")
     args = parser.parse_args(argv)
     try:
         path = build_dev_policy(

@@ -1,8 +1,9 @@
 """Read an embodiment's control config (configs/embodiments/<name>.yaml) with pyyaml.
 
 The runtime only needs the control-level facts: actuator order, gains, default pose, action scale, control_dt,
-the Inspire hand mapping and the link map. The YAML is the same file training reads; deploy parses it itself
-because it must not import robot_hoi.
+the Inspire hand mapping, the link map, and the `deploy` section training ignores: joint and effort limits, the
+largest action_clip and the hands' FORCE_SET/SPEED_SET, which the runtime enforces whatever a policy file says.
+The YAML is the same file training reads; deploy parses it itself because it must not import robot_hoi.
 """
 
 from __future__ import annotations
@@ -44,6 +45,16 @@ class ActuatorConfig:
 
 
 @dataclass(frozen=True)
+class DeployLimits:
+    """The YAML's `deploy` section: what the runtime enforces whatever a policy file says."""
+
+    joints: dict[str, tuple[float, float, float]]  # actuator -> (lower rad, upper rad, effort N m)
+    action_clip: float
+    hand_force_set: int  # FORCE_SET, g at the fingertip
+    hand_speed_set: int  # SPEED_SET, 0..1000
+
+
+@dataclass(frozen=True)
 class EmbodimentConfig:
     name: str
     path: Path
@@ -51,6 +62,7 @@ class EmbodimentConfig:
     actuators: tuple[ActuatorConfig, ...]
     hands: dict[str, tuple[HandChannel, ...]]
     link_map: dict[str, str] = field(default_factory=dict)
+    limits: DeployLimits | None = None  # None: the YAML has no deploy section (check_against_embodiment refuses)
 
     @property
     def actuator_names(self) -> list[str]:
@@ -157,7 +169,37 @@ def load_embodiment(name_or_path: str | os.PathLike) -> EmbodimentConfig:
         actuators=tuple(actuators),
         hands=hands,
         link_map={str(k): str(v) for k, v in link_map.items()},
+        limits=None if raw.get("deploy") is None else _deploy_limits(path, raw["deploy"], names),
     )
+
+
+def _deploy_limits(path: Path, raw, names: list[str]) -> DeployLimits:
+    from deploy.hands.tables import REGISTERS
+
+    if not isinstance(raw, dict) or not isinstance(raw.get("joint_limits"), dict):
+        raise DeployError(f"{path}: 'deploy' must be a mapping with 'joint_limits' (actuator: [lower, upper, effort])")
+    joints = {}
+    for name, entry in raw["joint_limits"].items():
+        where = f"deploy.joint_limits.{name}"
+        if name not in names:
+            raise DeployError(f"{path}: {where} is not an actuator")
+        if not isinstance(entry, list) or len(entry) != 3:
+            raise DeployError(f"{path}: {where} must be [lower rad, upper rad, effort N m]")
+        lower, upper, effort = (_number(path, where, v) for v in entry)
+        if not lower < upper or effort <= 0:
+            raise DeployError(f"{path}: {where} needs lower < upper and effort > 0, got {entry}")
+        joints[name] = (lower, upper, effort)
+    action_clip = _number(path, "deploy.action_clip", raw.get("action_clip"))
+    if action_clip <= 0:
+        raise DeployError(f"{path}: deploy.action_clip must be > 0, got {action_clip}")
+    hand = {}
+    for key, register in (("hand_force_set", "FORCE_SET"), ("hand_speed_set", "SPEED_SET")):
+        value, reg = raw.get(key), REGISTERS[register]
+        if isinstance(value, bool) or not isinstance(value, int) or not reg.low <= value <= reg.high:
+            raise DeployError(f"{path}: deploy.{key} must be an integer in {reg.low}..{reg.high} ({register}), "
+                              f"got {value!r}")
+        hand[key] = value
+    return DeployLimits(joints=joints, action_clip=action_clip, **hand)
 
 
 # How far the policy's gains and default pose may sit from the embodiment YAML (JSON and float32 round trips
@@ -167,10 +209,17 @@ GAIN_ATOL = 1e-6
 DEFAULT_POSE_ATOL_RAD = 1e-3
 
 
+LIMIT_ATOL = 1e-6  # a file's limit may pass the config's by float noise, no more
+MAX_PROBLEMS_SHOWN = 8
+
+
 def check_against_embodiment(contract: PolicyContract, embodiment_yaml_path: str | os.PathLike) -> None:
     """Refuse a policy trained for another robot layout: actuator names/order, control_dt, hand mapping, and
     (when the order matches) each actuator's kp, kd and default pose within GAIN_RTOL/GAIN_ATOL and
-    DEFAULT_POSE_ATOL_RAD."""
+    DEFAULT_POSE_ATOL_RAD. The deploy side owns the limits: a file whose joint or effort limits are wider than
+    the YAML's `deploy` section, whose action_clip is larger, or whose action_scale or (fixed) action_offset
+    differ from the actuators, is refused too. Passing, every limit the runtime takes from the file lies within
+    the deploy side's."""
     emb = load_embodiment(embodiment_yaml_path)
     problems = []
     if contract.embodiment != emb.name:
@@ -183,6 +232,7 @@ def check_against_embodiment(contract: PolicyContract, embodiment_yaml_path: str
             problems.append(f"actuator {i} is '{contract.actuator_names[i]}' but the config has '{emb.actuator_names[i]}'")
     else:
         problems.extend(_actuator_mismatches(contract, emb))
+        problems.extend(_limit_mismatches(contract, emb))
     if not math.isclose(contract.control_dt, emb.control_dt, rel_tol=1e-6, abs_tol=1e-9):
         problems.append(f"control_dt {contract.control_dt} s vs {emb.control_dt} s in the config")
     for side in HAND_SIDES:
@@ -196,7 +246,9 @@ def check_against_embodiment(contract: PolicyContract, embodiment_yaml_path: str
                     f"{theirs.open_rad}/{theirs.closed_rad} in the config"
                 )
     if problems:
-        raise ContractError(f"{contract.source} does not match {emb.path}: " + "; ".join(problems))
+        shown = problems[:MAX_PROBLEMS_SHOWN]
+        more = f"; and {len(problems) - len(shown)} more" if len(problems) > len(shown) else ""
+        raise ContractError(f"{contract.source} does not match {emb.path}: " + "; ".join(shown) + more)
 
 
 def _actuator_mismatches(contract: PolicyContract, emb: EmbodimentConfig) -> list[str]:
@@ -209,4 +261,41 @@ def _actuator_mismatches(contract: PolicyContract, emb: EmbodimentConfig) -> lis
         if abs(contract.default_pose[i] - act.default) > DEFAULT_POSE_ATOL_RAD:
             problems.append(f"{act.name} default pose {contract.default_pose[i]:.4f} vs {act.default:.4f} rad "
                             "in the config")
+    return problems
+
+
+def _limit_mismatches(contract: PolicyContract, emb: EmbodimentConfig) -> list[str]:
+    """'effort_limit left_knee_joint 1e+06 N m is above the config's 139 (and 40 more joints)': per field, the
+    first joint the file widens and how many more."""
+    limits = emb.limits
+    if limits is None:
+        return ["the config has no 'deploy' section (joint limits, effort limits, action_clip): the runtime takes "
+                "no limits from a policy file alone"]
+    found: dict[str, list[str]] = {}
+    for i, act in enumerate(emb.actuators):
+        name = act.name
+        if name not in limits.joints:
+            found.setdefault("missing", []).append(f"no deploy.joint_limits entry for {name} in the config")
+            continue
+        lower, upper, effort = limits.joints[name]
+        checks = (
+            ("joint_lower", contract.joint_lower[i] < lower - LIMIT_ATOL,
+             f"{contract.joint_lower[i]:.6g} rad is below the config's {lower:.6g}"),
+            ("joint_upper", contract.joint_upper[i] > upper + LIMIT_ATOL,
+             f"{contract.joint_upper[i]:.6g} rad is above the config's {upper:.6g}"),
+            ("effort_limit", contract.effort_limit[i] > effort + LIMIT_ATOL,
+             f"{contract.effort_limit[i]:g} N m is above the config's {effort:g}"),
+            ("action_scale", not math.isclose(contract.action_scale[i], act.action_scale, rel_tol=GAIN_RTOL,
+                                              abs_tol=GAIN_ATOL),
+             f"{contract.action_scale[i]:g} vs {act.action_scale:g} in the config"),
+            ("action_offset", abs(contract.action_offset[i] - act.default) > DEFAULT_POSE_ATOL_RAD,
+             f"{contract.action_offset[i]:.4f} rad vs {act.default:.4f} (default pose) in the config"),
+        )
+        for key, wrong, text in checks:
+            if wrong:
+                found.setdefault(key, []).append(f"{key} {name} {text}")
+    problems = [items[0] + (f" (and {len(items) - 1} more joints)" if len(items) > 1 else "")
+                for items in found.values()]
+    if contract.action_clip > limits.action_clip + LIMIT_ATOL:
+        problems.append(f"action_clip {contract.action_clip:g} is above the config's {limits.action_clip:g}")
     return problems

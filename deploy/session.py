@@ -58,8 +58,8 @@ class DeployOptions:
     hand_timeout: float | None = None
     hand_retries: int = 2
     hand_safe_state: str = "hold"
-    hand_force_limit: int = 1000
-    hand_speed: int = 1000
+    hand_force_limit: int | None = None  # FORCE_SET; None: the embodiment's deploy.hand_force_set (no higher)
+    hand_speed: int | None = None  # SPEED_SET; None: the embodiment's deploy.hand_speed_set (no higher)
     hand_threads: bool = True
     body: str | None = None  # "sim" | "dds"; default sim for dry runs, dds otherwise
     dds_interface: str | None = None
@@ -108,6 +108,8 @@ class Session(contextlib.ExitStack):
         contract = policy.contract
         embodiment_path = resolve_embodiment_path(o.embodiment)
         check_against_embodiment(contract, embodiment_path)
+        embodiment = load_embodiment(embodiment_path)
+        self.hand_settings = self._hand_settings(embodiment)
         motion = self._motion(contract)
         rate = self._rate(contract)
         self.log_dir = log_dir = self._log_dir()
@@ -131,7 +133,7 @@ class Session(contextlib.ExitStack):
         operator = OperatorInput() if auto_start else KeyboardOperator()
         status = make_status_view(o.status)
         self.callback(status.close)
-        mode_machine = load_embodiment(embodiment_path).mode_machine
+        mode_machine = embodiment.mode_machine
         watchdog = self._watchdog(body, contract, rate, mode_machine)
         self.runtime = Runtime(contract, policy, ObservationBuilder(contract, motion), body, tracker, hands,
                                clock=self.clock, safety=safety, operator=operator, events=events,
@@ -140,6 +142,21 @@ class Session(contextlib.ExitStack):
                                watchdog=watchdog)
         events.log("session", **self.description, log_dir=str(log_dir))
         events.log("hand_budget", every_n_ticks=hands.every_n_ticks, message=self.description["hand_budget"])
+
+    def _hand_settings(self, embodiment) -> tuple[int, int]:
+        """(FORCE_SET, SPEED_SET) for both hands: the embodiment's deploy values, the policy's training assumption;
+        the command line may lower them, never raise them."""
+        o = self.options
+        out = []
+        for flag, given, key in (("--hand-force-limit", o.hand_force_limit, "hand_force_set"),
+                                 ("--hand-speed", o.hand_speed, "hand_speed_set")):
+            assumed = getattr(embodiment.limits, key)
+            if given is not None and not 0 <= given <= assumed:
+                raise DeployError(f"{flag} {given} is above the embodiment's deploy.{key} {assumed} (what the policy "
+                                  f"was validated with; {embodiment.path}): give 0..{assumed}")
+            out.append(assumed if given is None else given)
+        self.description["hand_settings"] = f"FORCE_SET {out[0]} g, SPEED_SET {out[1]}"
+        return out[0], out[1]
 
     def _log_dir(self) -> Path:
         """The run's log folder, created and proven writable before anything is opened (a usage error if not)."""
@@ -314,7 +331,7 @@ class Session(contextlib.ExitStack):
         if plan.every_n_ticks > 1:
             log.warning("%s", plan.message)
         hands = Hands(buses[0], buses[1], contract.hands, clock=self.clock,
-                      force_limits=[o.hand_force_limit] * 6, speeds=[o.hand_speed] * 6,
+                      force_limits=[self.hand_settings[0]] * 6, speeds=[self.hand_settings[1]] * 6,
                       safe_state=o.hand_safe_state, threaded=o.hand_threads, every_n_ticks=plan.every_n_ticks)
         self.callback(hands.close)  # registered before connect: a half-connected pair is still closed
         try:

@@ -14,6 +14,7 @@ import os
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import yaml
@@ -66,6 +67,7 @@ class EmbodimentConfig:
     actuators: tuple[ActuatorCfg, ...]
     hands: dict[str, HandCfg]
     link_map: dict[str, str]  # robot body or site -> human body name
+    deploy: dict[str, Any] | None = None  # the robot runtime's own limits, read by deploy/embodiment.py only
 
     @property
     def physics_dt(self) -> float:

@@ -7,6 +7,7 @@ from __future__ import annotations
 import errno
 import io
 import os
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -547,3 +548,126 @@ def test_remote_liveness_from_lowstate_bytes():
     assert not remote_reporting(bytes(40))  # what a robot without a paired remote sends
     assert remote_reporting(wireless_remote_bytes(0))  # a paired remote, nothing pressed
     assert not remote_reporting(wireless_remote_bytes(0, live=False))
+
+
+# ------------------------------------------------------------------ 6. the deploy side owns the limits
+SHIPPED_STUDENT = Path(__file__).resolve().parents[2] / "policies" / "lift_place_student.onnx"
+
+
+def widened(contract, **changes):
+    import dataclasses
+
+    return dataclasses.replace(contract, **changes)
+
+
+def test_the_shipped_student_is_inside_the_deploy_limits():
+    from deploy.contract import PolicyContract, check_against_embodiment
+
+    from .conftest import EMBODIMENT_YAML
+
+    if not SHIPPED_STUDENT.is_file():
+        pytest.skip("no shipped student in this checkout")
+    check_against_embodiment(PolicyContract.from_onnx(SHIPPED_STUDENT), EMBODIMENT_YAML)
+
+
+@pytest.mark.parametrize("field,change,expected", [
+    ("action_scale", lambda c: c.action_scale * 10, "action_scale left_hip_pitch_joint 6 vs 0.6 in the config"),
+    ("joint_lower", lambda c: c.joint_lower - 3.0,
+     "joint_lower left_hip_pitch_joint -5.5307 rad is below the config's -2.5307"),
+    ("joint_upper", lambda c: c.joint_upper + 3.0,
+     "joint_upper left_hip_pitch_joint 5.8798 rad is above the config's 2.8798 (and 40 more joints)"),
+    ("effort_limit", lambda c: np.full_like(c.effort_limit, 1e6),
+     "effort_limit left_hip_pitch_joint 1e+06 N m is above the config's 88 (and 40 more joints)"),
+    ("action_offset", lambda c: c.action_offset + 0.5,
+     "action_offset left_hip_pitch_joint 0.4000 rad vs -0.1000 (default pose) in the config"),
+    ("action_clip", lambda c: 1e3, "action_clip 1000 is above the config's 4"),
+])
+def test_a_policy_file_cannot_widen_its_own_limits(dev_policy, field, change, expected):
+    from deploy.contract import PolicyContract, check_against_embodiment
+    from deploy.errors import ContractError
+
+    from .conftest import EMBODIMENT_YAML
+
+    contract = PolicyContract.from_onnx(dev_policy)
+    check_against_embodiment(contract, EMBODIMENT_YAML)
+    with pytest.raises(ContractError) as info:
+        check_against_embodiment(widened(contract, **{field: change(contract)}), EMBODIMENT_YAML)
+    assert expected in str(info.value), str(info.value)
+
+
+def test_a_widened_policy_is_refused_at_start_with_a_usage_exit(dev_policy, tmp_path, capsys):
+    """The issue's file: the shipped student's metadata with scale x10, limits +3 rad, effort 1e6, offsets +0.5."""
+    from deploy.cli import main
+    from deploy.contract import PolicyContract
+
+    from .test_contract import write_policy
+
+    contract = PolicyContract.from_onnx(dev_policy)
+    bad = widened(contract, action_scale=contract.action_scale * 10, joint_lower=contract.joint_lower - 3.0,
+                  joint_upper=contract.joint_upper + 3.0, effort_limit=np.full_like(contract.effort_limit, 1e6),
+                  action_offset=contract.action_offset + 0.5, default_pose=contract.default_pose)
+    path = write_policy(tmp_path / "wide.onnx", bad.to_metadata(), contract.obs_dim, contract.num_actions)
+    (tmp_path / contract.reference.file).write_bytes(contract.reference_path().read_bytes())
+    code = main(["--dry-run", "--policy", str(path), "--log-dir", str(tmp_path / "logs"), "--auto-start"])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1, err
+    for field in ("joint_lower", "joint_upper", "effort_limit", "action_scale", "action_offset"):
+        assert f"{field} left_hip_pitch_joint" in err and "(and 40 more joints)" in err, err
+
+
+def test_deploy_limits_are_the_models():
+    """The YAML's deploy limits are the physical description training exports (robot_hoi's model)."""
+    from deploy.embodiment import load_embodiment
+
+    from .conftest import EMBODIMENT_YAML
+
+    description = pytest.importorskip("robot_hoi.embodiment.config").robot_description("g1_inspire")
+    joints = {j.name: j for j in description.joints}
+    limits = load_embodiment(EMBODIMENT_YAML).limits
+    for name, (lower, upper, effort) in limits.joints.items():
+        assert (lower, upper, effort) == (*joints[name].range, joints[name].effort), name
+    assert sorted(limits.joints) == sorted(load_embodiment(EMBODIMENT_YAML).actuator_names)
+
+
+def test_training_still_reads_the_embodiment_yaml():
+    config = pytest.importorskip("robot_hoi.embodiment.config")
+    emb = config.load_embodiment("g1_inspire")
+    assert len(emb.actuators) == 41 and emb.deploy["action_clip"] == 4.0
+
+
+def dry_options(dev_policy, tmp_path, **changes):
+    from deploy.session import DeployOptions
+
+    return DeployOptions(policy=str(dev_policy), dry_run=True, log_dir=str(tmp_path / "logs"), status="off",
+                         auto_start=True, **changes)
+
+
+def test_hand_force_and_speed_come_from_the_embodiment_yaml(dev_policy, tmp_path):
+    import yaml
+
+    from deploy.session import Session
+
+    from .conftest import EMBODIMENT_YAML
+
+    raw = yaml.safe_load(EMBODIMENT_YAML.read_text())
+    raw["deploy"].update(hand_force_set=600, hand_speed_set=800)
+    path = tmp_path / "g1_inspire.yaml"
+    path.write_text(yaml.safe_dump(raw))
+    with Session(dry_options(dev_policy, tmp_path, embodiment=str(path))) as session:
+        for side in session.runtime.hands.sides:
+            assert side.bus.force_limits.tolist() == [600] * 6 and side.bus.speeds.tolist() == [800] * 6
+    with Session(dry_options(dev_policy, tmp_path, hand_force_limit=300)) as session:  # lower is allowed
+        assert session.runtime.hands.sides[0].bus.force_limits.tolist() == [300] * 6
+        assert session.runtime.hands.sides[0].bus.speeds.tolist() == [1000] * 6
+
+
+@pytest.mark.parametrize("flag,value,expected", [
+    ("--hand-force-limit", "3000", "--hand-force-limit 3000 is above the embodiment's deploy.hand_force_set 1000"),
+    ("--hand-speed", "1001", "--hand-speed 1001 is above the embodiment's deploy.hand_speed_set 1000"),
+])
+def test_hand_settings_above_what_training_assumed_are_refused(dev_policy, tmp_path, capsys, flag, value, expected):
+    from deploy.cli import main
+
+    code = main(["--dry-run", "--policy", str(dev_policy), "--log-dir", str(tmp_path), flag, value])
+    err = capsys.readouterr().err
+    assert code == 2 and expected in err and err.count("\n") == 1, err
