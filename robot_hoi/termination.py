@@ -3,18 +3,36 @@
 The training env calls these on batched torch tensors, sim2sim on numpy arrays: every function uses only the
 operators both libraries share (arithmetic, comparisons, `.sum(-1)`, `.mean(-1)`, `.clip`, `&`, `~`), so the two can never
 drift. No torch import here: sim2sim's workers run without torch.
+
+Each condition that ends an episode is a registered term: a short function over the measured quantities
+(`Measured`, built by the env in mdp/terminations.py and by sim2sim's monitor) whose keyword arguments are its
+parameters, read from the `Thresholds` by name. The five conditions below read its flat fields; a condition added
+later is one function here, registered with @condition, and one config entry, `terminations.conditions.<name>`
+holding its parameters (the entry switches it on), e.g.
+
+    @condition
+    def root_too_high(m: Measured, max_root_height: float):
+        return m.root_height > max_root_height
+
+    terminations:
+      conditions: {root_too_high: {max_root_height: 1.2}}
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import inspect
+from collections.abc import Callable
+from dataclasses import dataclass, field, fields
+from typing import Any
 
 _EPS = 1e-4
 
 
 @dataclass
 class Thresholds:
-    """The thresholds as written (configs/tasks/interaction.yaml `terminations`)."""
+    """The conditions' parameters as written (configs/tasks/interaction.yaml `terminations`), plain values: e.g.
+    InterMimic's own evaluation is Thresholds(max_mean_object_point_error=0.5, contact_tolerance=0.0,
+    contact_from_reference=False)."""
 
     max_mean_link_error: float = 0.5        # m, mapped links on average further than this from their reference
     min_root_height: float = 0.15           # m
@@ -29,6 +47,93 @@ class Thresholds:
     # the retargeted wrists and fingertips sit 5-8 cm off the table while their collision geometry is within a few
     # mm of it, so a policy tracking the reference exactly lost "contact" 10 frames after the grip began
     contact_from_reference: bool = True
+    # Conditions registered beyond the five above, each switched on by its entry: name -> its parameters (those left
+    # out take the function's defaults)
+    conditions: dict[str, dict[str, float | int | bool]] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        for name, params in self.conditions.items():
+            term = CONDITIONS.get(name)
+            if term is None:
+                raise ValueError(f"conditions.{name}: no such termination condition (registered: "
+                                 f"{', '.join(CONDITIONS)})")
+            unknown = sorted(set(params) - set(term.parameters))
+            missing = [p for p in term.parameters if p not in params and p not in term.defaults]
+            if unknown or missing:
+                raise ValueError(f"conditions.{name}: parameters {', '.join(term.parameters)}"
+                                 + (f"; unknown {', '.join(unknown)}" if unknown else "")
+                                 + (f"; missing {', '.join(missing)}" if missing else ""))
+
+
+@dataclass
+class Measured:
+    """What the conditions read, per env: torch tensors (training) or numpy values (sim2sim)."""
+
+    link_error: Any         # m, mean distance of the mapped links from their reference (mean_link_error)
+    root_height: Any        # m, the pelvis's height
+    object_error: Any       # m, mean distance of the object's surface points from the reference's
+    interaction_error: Any  # m, interaction_distance_error
+    contact_loss: Any       # (..., 2) frames each required hand contact has been missing (contact_loss_count)
+
+
+@dataclass(frozen=True)
+class Condition:
+    func: Callable[..., Any]      # (m: Measured, **parameters) -> bool per env
+    parameters: tuple[str, ...]   # its keyword arguments, by name
+    defaults: dict[str, Any]
+
+
+CONDITIONS: dict[str, Condition] = {}  # name -> condition, in the order they are checked and reported
+
+
+def condition(func: Callable[..., Any]) -> Callable[..., Any]:
+    """Register `func(m: Measured, **parameters) -> bool per env` as the condition named as the function."""
+    if func.__name__ in CONDITIONS:
+        raise ValueError(f"termination condition {func.__name__!r} is registered already")
+    params = list(inspect.signature(func).parameters.values())[1:]
+    CONDITIONS[func.__name__] = Condition(func, tuple(p.name for p in params),
+                                          {p.name: p.default for p in params if p.default is not p.empty})
+    return func
+
+
+@condition
+def link_deviation(m: Measured, max_mean_link_error: float):
+    return m.link_error > max_mean_link_error
+
+
+@condition
+def root_too_low(m: Measured, min_root_height: float):
+    return m.root_height < min_root_height
+
+
+@condition
+def object_deviation(m: Measured, max_mean_object_point_error: float):
+    return m.object_error > max_mean_object_point_error
+
+
+@condition
+def interaction_distance(m: Measured, max_interaction_distance_error: float):
+    return m.interaction_error > max_interaction_distance_error
+
+
+@condition
+def contact_lost(m: Measured, max_contact_loss_frames: int):
+    return _amax_last(m.contact_loss) > max_contact_loss_frames
+
+
+_FIELDS = {f.name for f in fields(Thresholds)}
+
+
+def ended(th: Thresholds, m: Measured) -> dict:
+    """{condition: bool per env} for every condition `th` holds the parameters of (its entry in `th.conditions`,
+    else its fields); the episode ends where any is true."""
+    out = {}
+    for name, term in CONDITIONS.items():
+        if name in th.conditions:
+            out[name] = term.func(m, **th.conditions[name])
+        elif term.parameters and all(p in _FIELDS for p in term.parameters):
+            out[name] = term.func(m, **{p: getattr(th, p) for p in term.parameters})
+    return out
 
 
 def hand_link_groups(link_names) -> list[list[int]]:
@@ -72,14 +177,8 @@ def contact_loss_count(count, need, touching, nearest_hand_distance, th: Thresho
 
 
 def reasons(th: Thresholds, link_error, root_height, object_error, interaction_error, contact_loss) -> dict:
-    """{reason: bool per env}; the episode ends where any is true."""
-    return {
-        "link_deviation": link_error > th.max_mean_link_error,
-        "root_too_low": root_height < th.min_root_height,
-        "object_deviation": object_error > th.max_mean_object_point_error,
-        "interaction_distance": interaction_error > th.max_interaction_distance_error,
-        "contact_lost": _amax_last(contact_loss) > th.max_contact_loss_frames,
-    }
+    """`ended` with the measured quantities given one by one."""
+    return ended(th, Measured(link_error, root_height, object_error, interaction_error, contact_loss))
 
 
 def interaction_tracked(worst_object_error, worst_body_error, max_object_error: float, max_body_error: float):

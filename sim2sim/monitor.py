@@ -128,8 +128,9 @@ class EpisodeMonitor(OperatorInput):
             ref_nearest = np.array([ref_distance[ids].min() for ids in self._hand_links])
             self.contact_loss = termination.contact_loss_count(
                 self.contact_loss, self.ref.hand_contact[f], world.hand_contact(), nearest, th, ref_nearest)
-        ended = termination.reasons(th, np.float64(link_err), world.data.qpos[2], np.float64(obj_err),
-                                    np.float64(inter_err), self.contact_loss)
+        ended = termination.ended(th, termination.Measured(np.float64(link_err), world.data.qpos[2],
+                                                           np.float64(obj_err), np.float64(inter_err),
+                                                           self.contact_loss))
         reasons = [name for name, hit in ended.items() if hit]
         if reasons:
             self.terminations = reasons

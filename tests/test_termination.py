@@ -158,3 +158,44 @@ def test_env_and_sim2sim_share_the_thresholds():
 
     assert TerminationCfg is Thresholds
     assert Thresholds().contact_tolerance == pytest.approx(0.02)
+
+
+@pytest.fixture
+def root_too_high():
+    """A new condition, registered as a user adds one: one function (and, in each test, one config entry)."""
+    from robot_hoi import termination as T
+
+    @T.condition
+    def root_too_high(m: T.Measured, max_root_height: float):
+        return m.root_height > max_root_height
+
+    yield {"root_too_high": {"max_root_height": 0.5}}  # the config entry: the pelvis stands at ~0.79 m
+    del T.CONDITIONS["root_too_high"]
+
+
+def test_a_new_condition_is_one_function_and_one_config_entry(root_too_high):
+    """Registered and given its entry in `terminations.conditions`, a new condition ends the env's episodes under
+    its name and sim2sim's monitor's alike; without the entry it is off. Bad entries are refused by name."""
+    from robot_hoi.data.objects import box_asset
+    from robot_hoi.embodiment import load_embodiment
+    from robot_hoi.tasks.interaction.scene_setup import InteractionScene
+    from robot_hoi.termination import Thresholds
+
+    from .tasks.test_bookkeeping import make_env
+
+    scene = InteractionScene(load_embodiment("g1_inspire"), box_asset((0.4, 0.4, 0.3)))
+    for entry in ({}, root_too_high):
+        env = make_env(scene, terminations={"conditions": entry})
+        _, _, terminated, _, extras = env.step(torch.zeros(env.num_envs, env.num_actions))
+        assert terminated.all() == bool(entry) and ("ended_by/root_too_high" in extras["episode"]) == bool(entry)
+        if entry:
+            assert extras["episode"]["ended_by/root_too_high"].tolist() == [1.0, 1.0]
+            assert extras["episode"]["ended_by/link_deviation"].tolist() == [0.0, 0.0]
+    assert _run_monitor(0.01, ticks=3).terminations == []
+    stopped = _run_monitor(0.01, ticks=3, conditions=root_too_high)
+    assert stopped.terminations == ["root_too_high"] and stopped.ticks == [1]
+    with pytest.raises(ValueError, match="conditions.root_too_hi: no such termination condition"):
+        Thresholds(conditions={"root_too_hi": {"max_root_height": 0.5}})
+    with pytest.raises(ValueError, match="conditions.root_too_high: parameters max_root_height; unknown height; "
+                                         "missing max_root_height"):
+        Thresholds(conditions={"root_too_high": {"height": 0.5}})
