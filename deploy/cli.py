@@ -48,8 +48,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                        help="hand ids (default 1 1 on serial/modbus, 1 2 on CAN)")
     hands.add_argument("--can-channel", default=None, help="CAN channel, e.g. can0")
     hands.add_argument("--can-interface", default=None, help="python-can interface (default socketcan)")
-    hands.add_argument("--hand-timeout", type=float, default=None, help="seconds per bus try (default per transport)")
-    hands.add_argument("--hand-retries", type=int, default=2, help="extra tries per bus request (default 2)")
+    hands.add_argument("--hand-timeout", type=float, default=None,
+                       help="seconds per bus try (default: from the line rate, ~12 ms on RS485 at 115200 baud)")
+    hands.add_argument("--hand-retries", type=int, default=None,
+                       help="extra tries per bus request (default: as many lost replies as fit before the hand data "
+                            "goes stale, at most 3)")
     hands.add_argument("--hand-safe-state", choices=("hold", "open"), default="hold",
                        help="on a fault: hold the last pose (default; a held box is not dropped) or open")
     hands.add_argument("--hand-force-limit", type=int, default=None,

@@ -27,8 +27,9 @@ from deploy.clock import MonotonicClock
 from deploy.contract import check_against_embodiment
 from deploy.embodiment import load_embodiment, resolve_embodiment_path
 from deploy.errors import BodyLinkError, DeployError, HandFaultError, HandLinkError
-from deploy.hand_budget import plan_hand_rate
+from deploy.hand_budget import plan_hand_rate, plan_hand_timing
 from deploy.hand_pair import Hands
+from deploy.hands import DEFAULT_BAUDRATE, DEFAULT_CAN_BITRATE
 from deploy.loop import Runtime
 from deploy.motion import load_motion
 from deploy.observations import ObservationBuilder
@@ -56,7 +57,7 @@ class DeployOptions:
     can_channel: str | None = None
     can_interface: str | None = None
     hand_timeout: float | None = None
-    hand_retries: int = 2
+    hand_retries: int | None = None  # None: derived from the loop period and line rate (deploy.hand_budget)
     hand_safe_state: str = "hold"
     hand_force_limit: int | None = None  # FORCE_SET; None: the embodiment's deploy.hand_force_set (no higher)
     hand_speed: int | None = None  # SPEED_SET; None: the embodiment's deploy.hand_speed_set (no higher)
@@ -305,11 +306,8 @@ class Session(contextlib.ExitStack):
 
         o = self.options
         transport = o.hand_bus
-        common = {"retries": o.hand_retries, "safe_pose": o.hand_safe_state}
-        if o.hand_timeout is not None:
-            common["timeout"] = o.hand_timeout
         sim_options = {"channel": f"inspire-sim-{id(self):x}"} if transport == "can" else {}  # one CAN bus
-        buses = []
+        links = []
         for i, side in enumerate(("left", "right")):
             if real_ports:
                 if transport == "can":
@@ -323,13 +321,17 @@ class Session(contextlib.ExitStack):
                 sim = start_simulated_hand(transport, side, hand_id=hand_ids[i], **sim_options)
                 self.callback(sim.stop)
                 kwargs = sim.bus_kwargs()
-            buses.append(make_hand_bus(transport, side, **kwargs, **common))
+            links.append(kwargs)
         self.description["hands"] = f"{transport} ({'real ports' if real_ports else 'simulated devices'})"
-        plan = plan_hand_rate(transport, _line_rate(buses[0]), _hands_per_link(buses), rate,
-                              o.safety.hand_bus_budget_share, o.safety.min_hand_rate_share)
+        line_rate, per_link = _line_rate(transport, links[0]), _hands_per_link(links)
+        plan = plan_hand_rate(transport, line_rate, per_link, rate, o.safety.hand_bus_budget_share,
+                              o.safety.min_hand_rate_share)
+        timing = plan_hand_timing(transport, line_rate, per_link, rate, plan.every_n_ticks,
+                                  o.safety.max_input_age_periods, o.hand_timeout, o.hand_retries)
         self.description["hand_budget"] = plan.message
-        if plan.every_n_ticks > 1:
-            log.warning("%s", plan.message)
+        self.description["hand_timing"] = timing.message
+        buses = [make_hand_bus(transport, side, **kwargs, timeout=timing.timeout_s, retries=timing.retries,
+                               safe_pose=o.hand_safe_state) for side, kwargs in zip(("left", "right"), links, strict=True)]
         hands = Hands(buses[0], buses[1], contract.hands, clock=self.clock,
                       force_limits=[self.hand_settings[0]] * 6, speeds=[self.hand_settings[1]] * 6,
                       safe_state=o.hand_safe_state, threaded=o.hand_threads, every_n_ticks=plan.every_n_ticks)
@@ -338,6 +340,8 @@ class Session(contextlib.ExitStack):
             hands.connect()
         except (HandLinkError, HandFaultError) as exc:  # cable, power, port, id: the operator can fix these
             raise DeployError(f"the hands did not come up: {exc}") from exc
+        with contextlib.suppress(OSError):  # the operator sees what the hands' bus can do before anything moves
+            print(f"deploy: hand bus: {plan.message}; {timing.message}", file=sys.stderr, flush=True)
         return hands
 
     # ---------------------------------------------------------------- running
@@ -383,13 +387,16 @@ def is_loopback_interface(name: str) -> bool:
         return name in ("lo", "lo0")
 
 
-def _line_rate(bus) -> float:
-    return float(getattr(bus, "bitrate", None) or getattr(bus, "baudrate", 115200))
+def _line_rate(transport: str, bus_kwargs: dict) -> float:
+    """Baud (RS485) or bit rate (CAN) a bus built from these make_hand_bus arguments runs at."""
+    if transport == "can":
+        return float(bus_kwargs.get("can_bitrate", DEFAULT_CAN_BITRATE))
+    return float(bus_kwargs.get("baudrate", DEFAULT_BAUDRATE))
 
 
-def _hands_per_link(buses) -> int:
+def _hands_per_link(bus_kwargs: list[dict]) -> int:
     """Hands on the busiest link: both on one CAN channel or one RS485 port add up."""
-    links = [getattr(b, "channel", None) or getattr(b, "port", None) or id(b) for b in buses]
+    links = [kw.get("can_channel") or kw.get("port") or i for i, kw in enumerate(bus_kwargs)]
     return max(links.count(link) for link in links)
 
 

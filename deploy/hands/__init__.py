@@ -16,6 +16,8 @@ from deploy.hands.base import HandBus, HandState
 __all__ = ["TRANSPORTS", "HandBus", "HandState", "make_hand_bus"]
 
 TRANSPORTS = ("serial", "modbus", "can")
+DEFAULT_BAUDRATE = 115200  # the Inspire hands' factory RS485 setting
+DEFAULT_CAN_BITRATE = 1_000_000
 
 
 def make_hand_bus(
@@ -24,10 +26,10 @@ def make_hand_bus(
     *,
     port: str | None = None,
     hand_id: int = 1,
-    baudrate: int = 115200,
+    baudrate: int = DEFAULT_BAUDRATE,
     can_channel: str | None = None,
     can_interface: str | None = None,
-    can_bitrate: int = 1_000_000,
+    can_bitrate: int = DEFAULT_CAN_BITRATE,
     timeout: float | None = None,
     retries: int = 2,
     safe_pose: str | Sequence[int] = "hold",

@@ -671,3 +671,65 @@ def test_hand_settings_above_what_training_assumed_are_refused(dev_policy, tmp_p
     code = main(["--dry-run", "--policy", str(dev_policy), "--log-dir", str(tmp_path), flag, value])
     err = capsys.readouterr().err
     assert code == 2 and expected in err and err.count("\n") == 1, err
+
+
+# ------------------------------------------------------------------ 8. hand timing that fits the loop
+def test_hand_timing_retries_lost_replies_before_the_data_goes_stale():
+    from deploy.hand_budget import plan_hand_timing
+
+    plan = plan_hand_timing("serial", 115200, hands_per_link=1, loop_hz=30.0, every_n_ticks=1, max_age_periods=2.0)
+    assert plan.stale_s == pytest.approx(2 / 30)
+    assert plan.timeout_s < 0.015 and plan.lost_replies >= 2 and plan.retries >= 2
+    assert plan.cycle_s + plan.lost_replies * plan.retry_s <= plan.stale_s
+    assert f"{plan.lost_replies} lost replies" in plan.message and "66.7 ms" in plan.message
+    old = plan_hand_timing("serial", 115200, 1, 30.0, 1, 2.0, timeout_s=0.03)  # the fixed 30 ms per try
+    assert old.lost_replies == 1
+    can = plan_hand_timing("can", 1_000_000, hands_per_link=2, loop_hz=50.0, every_n_ticks=1, max_age_periods=2.0)
+    assert can.lost_replies >= 2
+
+
+def test_a_lost_reply_that_cannot_be_retried_in_time_is_refused_at_start():
+    from deploy.errors import DeployError
+    from deploy.hand_budget import plan_hand_timing
+
+    with pytest.raises(DeployError, match=r"--hand-timeout 0\.06.*cannot be retried before .* stale \(66\.7 ms"):
+        plan_hand_timing("serial", 115200, 1, 30.0, 1, 2.0, timeout_s=0.06)
+
+
+def test_two_lost_replies_on_the_wire_are_retried_inside_the_stale_limit():
+    """Real bytes: a paced simulated hand on a pty drops two replies; the exchange (write ANGLE_SET, read the
+    state) still completes, and in less than the 2-period stale limit of a 30 Hz loop."""
+    import time
+
+    from deploy.hand_budget import plan_hand_timing
+    from deploy.hands import make_hand_bus
+    from deploy.hands.simulated import start_simulated_hand
+
+    plan = plan_hand_timing("serial", 115200, 1, 30.0, 1, 2.0)
+    sim = start_simulated_hand("serial", "left")
+    bus = make_hand_bus("serial", "left", **sim.bus_kwargs(), timeout=plan.timeout_s, retries=plan.retries)
+    try:
+        bus.connect()
+        took = []
+        for _ in range(3):  # the best of three: a loaded machine only ever adds time
+            sim.drop_next(2)
+            start = time.monotonic()
+            bus.write_angles([500] * 6)
+            bus.read_state()
+            took.append(time.monotonic() - start)
+        assert bus.stats.failures["timeout"] == 6
+        assert min(took) < plan.stale_s, f"{min(took) * 1e3:.1f} ms >= {plan.stale_s * 1e3:.1f} ms"
+    finally:
+        bus.disconnect()
+        sim.stop()
+
+
+def test_the_hand_budget_is_printed_at_start_and_used(dev_policy, tmp_path, capsys):
+    from deploy.session import Session
+
+    with Session(dry_options(dev_policy, tmp_path, hand_bus="serial")) as session:
+        bus = session.runtime.hands.sides[0].bus
+        assert bus.timeout < 0.015 and bus.retries >= 2
+    err = capsys.readouterr().err
+    assert "hand bus:" in err and "lost replies fit" in err, err
+    assert "lost replies fit" in session.description["hand_timing"]
