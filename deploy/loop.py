@@ -1,9 +1,7 @@
 """The control loop: one tick = read inputs, step the safety state machine, compute and send commands.
 
-Timing uses absolute deadlines on an injectable clock: deadline_k = start + k * dt, the loop sleeps until the
-next deadline (never `sleep(dt)` after compute), counts overruns (too many within a window is a fault) and skips
-deadlines it has already missed. Each tick's lateness (wake-up - deadline), period (wake-up - previous wake-up)
-and compute time are recorded (deploy.loop_timing).
+`Runtime.run` ticks on absolute deadlines (deploy.loop_run: timing, real-time set-up, watchdog heartbeat, crash
+path); `tick()` is one control step, driven by it or, in tests, by hand on a fake clock.
 
 Stopping: request_stop (operator, duration), request_estop and request_signal all end in DAMP for damp_s; more
 stops never shorten it, only a second signal aborts after one damping command. `outcome` (deploy.outcome) says
@@ -21,7 +19,6 @@ A tick, in order:
 
 from __future__ import annotations
 
-import contextlib
 from dataclasses import dataclass
 
 import numpy as np
@@ -32,11 +29,11 @@ from deploy.clock import Clock, MonotonicClock
 from deploy.contract import PolicyContract
 from deploy.errors import BodyLinkError
 from deploy.hand_pair import Hands, HandsReading
+from deploy.loop_run import run_loop
 from deploy.loop_timing import LoopTiming
 from deploy.observations import ObservationBuilder, RobotState
 from deploy.operator import OperatorInput
 from deploy.outcome import Outcome, StopRequests, classify
-from deploy.realtime import RealtimeRun
 from deploy.remote import RemotePresses
 from deploy.runlog import EventLog, TickRecorder, tick_row
 from deploy.safety import (
@@ -458,78 +455,9 @@ class Runtime:
 
     # ------------------------------------------------------------------ the loop
     def run(self, duration_s: float | None = None) -> dict:
-        """Tick on absolute deadlines until the state machine stops (or duration_s ends the run through DAMP)."""
-        clock = self.clock
-        crashed = False
-        with RealtimeRun(self.gil_switch_interval_s, self.realtime_priority, self.lock_memory) as rt:
-            self.scheduling, self.memory, self._realtime = rt.scheduling, rt.memory, rt
-            for problem in (rt.scheduling_problem, None if rt.memory == "locked" or not self.lock_memory
-                            else f"memory {rt.memory}"):
-                if problem:
-                    self.events.log("warning", reason=problem)
-            start = clock.now()
-            self.phase_since = start
-            deadline = start
-            self.events.log("start", rate_hz=1.0 / self.dt, policy=self.contract.source, duration_s=duration_s,
-                            scheduling=self.scheduling, memory=self.memory, watchdog=self.watchdog.description)
-            self.watchdog.start(lambda: self._send_damping(None))
-            try:
-                while True:
-                    wake = clock.now()
-                    if duration_s is not None and wake - start >= duration_s and self.stops.first is None:
-                        self.request_stop("duration reached", "duration")
-                        if self.phase == Phase.WAIT_STATE:
-                            self.exit_reason = "duration reached before inputs were ready"
-                    keep_going = self.tick(deadline)
-                    self.watchdog.beat(commanding=self.phase != Phase.WAIT_STATE)
-                    done = clock.now()
-                    self.timing.record(wake, deadline, done)
-                    self._show_status()
-                    if not keep_going or (self.exit_reason and self.phase == Phase.WAIT_STATE):
-                        break
-                    deadline += self.dt
-                    if done > deadline:
-                        deadline += self._overrun(done, deadline) * self.dt
-                    clock.sleep_until(deadline)
-            except BaseException as exc:
-                crashed = True
-                self._crash_damping(exc)
-                raise
-            finally:
-                self._realtime = None
-                self.watchdog.end(clean=not crashed)  # after a crash it stays armed: it damps when we are gone
-                end = clock.now()
-                self.phase_time[self.phase.name] = self.phase_time.get(self.phase.name, 0.0) + (end - self.phase_since)
-                self.phase_since = end
-                with contextlib.suppress(Exception):  # the robot is damped; what is left is paperwork
-                    self.events.log("stop", reason=self.exit_reason or self.stops.reason or "", ticks=self.ticks,
-                                    final_phase=self.phase.name, outcome=self.outcome.name)
-                    self.events.sync(wait_s=2.0)
-                    self.recorder.sync(wait_s=2.0)
-        return self.summary()
-
-    def _crash_damping(self, exc: BaseException) -> None:
-        """The loop broke: damping goes out first, then the record of why."""
-        try:
-            self._send_damping(None)
-        except Exception as send_exc:
-            self.body_send_errors += 1
-            exc.add_note(f"the damping command could not be sent either: {send_exc}")
-        self.exit_reason = self.exit_reason or f"crashed: {type(exc).__name__}: {exc}"
-        with contextlib.suppress(Exception):
-            self.events.log("error", tick=self.ticks, reason=f"runtime crashed: {type(exc).__name__}: {exc}")
-
-    def _overrun(self, done: float, next_deadline: float) -> int:
-        """Count it, log it, fault on too many; returns the deadlines to skip."""
-        skipped = self.timing.overrun(done, next_deadline)
-        count = self.timing.overruns
-        if count <= 10 or count % 100 == 0:
-            self.events.log("overrun", tick=self.ticks, late_ms=(done - next_deadline) * 1e3, skipped=skipped,
-                            count=count)
-        problem = self.timing.overrun_fault()
-        if problem and self.phase in COMMANDING_PHASES and problem not in self._deferred_faults:
-            self._deferred_faults.append(problem)
-        return skipped
+        """Tick on absolute deadlines until the state machine stops (or duration_s ends the run through DAMP);
+        returns the summary. The timing, the process set-up and the crash path are deploy.loop_run's."""
+        return run_loop(self, duration_s)
 
     def summary(self) -> dict:
         outcome = self.outcome
