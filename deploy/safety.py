@@ -17,8 +17,9 @@ with a frozen tick, a hand that has not answered its latest request for that lon
 bits or a reading outside its register's range, motor error bits or over-temperature, another rt/lowcmd
 publisher, a mode_machine change, non-finite state, measured joints (body and hands) beyond their limits
 (+ margin), non-finite or absurd actions (|a| > action_fault_factor * action_clip), tracker poses stale during
-POLICY, IMU and tracker disagreeing on the pelvis tilt, too many loop overruns, hands commanded below
-`min_hand_rate_share` of the loop rate, an e-stop, stop or signal. Targets are clamped to the joint limits and
+POLICY, IMU and tracker disagreeing on the pelvis tilt, too many loop overruns or one tick more than
+`max_stall_periods` late, the watchdog having fired (deploy.watchdog), a silent wireless remote when it is the
+e-stop (`remote_estop`), hands commanded below `min_hand_rate_share` of the loop rate, an e-stop, stop or signal. Targets are clamped to the joint limits and
 rate limited per tick (`max_target_rate` rad/s) before they are sent; a final check refuses anything outside
 the limits.
 """

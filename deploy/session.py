@@ -5,7 +5,9 @@ SimulatedTracker, and two simulated Inspire hands speaking the chosen transport'
 a dry run given real hand ports (or a CAN channel) uses those instead; the runtime is the same. Real run: the DDS
 body, the UDP pose receiver and real hand ports are required, and the operator confirms twice: in ZERO_TORQUE
 (stiffen) and in HOLD (start the policy). --auto-start confirms both by itself, for dry runs; for a simulator
-reached over DDS it must name the interface (--auto-start-on IFACE), and a real body never gets it by default.
+reached over DDS it must name the interface (--auto-start-on IFACE), which must be a loopback interface: a real
+body never gets it. Before anything opens, the policy is checked against the embodiment YAML (its `deploy`
+limits included) and the log folder must be writable.
 """
 
 from __future__ import annotations

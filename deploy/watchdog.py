@@ -145,6 +145,7 @@ class ProcessWatchdog(NullWatchdog):
             pass
 
     def check(self) -> str | None:
+        """The reason once it fired; a watchdog process that died is a fault too (nothing guards the robot)."""
         if self.fired is None:
             try:
                 data = os.read(self._out, 64)
@@ -152,6 +153,8 @@ class ProcessWatchdog(NullWatchdog):
                 data = b""
             if b"F" in data:
                 self.fired = _reason(self.timeout_s, self.timeout_s, "the watchdog process")
+            elif not self._said_goodbye and self._proc.poll() is not None:
+                self.fired = f"watchdog process exited (code {self._proc.returncode}): the robot has no watchdog"
         return self.fired
 
     def end(self, clean: bool) -> None:

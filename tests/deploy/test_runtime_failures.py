@@ -733,3 +733,21 @@ def test_the_hand_budget_is_printed_at_start_and_used(dev_policy, tmp_path, caps
     err = capsys.readouterr().err
     assert "hand bus:" in err and "lost replies fit" in err, err
     assert "lost replies fit" in session.description["hand_timing"]
+
+
+def test_a_dead_watchdog_process_is_a_fault(tmp_path):
+    import signal
+
+    pytest.importorskip("cyclonedds")
+    from deploy.watchdog import ProcessWatchdog
+
+    watchdog = ProcessWatchdog(timeout_s=1.0, damp_s=0.1, period_s=0.02, damp_kd=8.0, num_joints=29,
+                               domain_id=100 + os.getpid() % 50, interface="lo", mode_machine=5)
+    try:
+        watchdog.beat(commanding=True)
+        assert watchdog.check() is None
+        os.kill(watchdog._proc.pid, signal.SIGKILL)
+        watchdog._proc.wait()
+        assert watchdog.check().startswith("watchdog process exited (code -9)")
+    finally:
+        watchdog.close()
