@@ -2,12 +2,14 @@
 
 Two kinds of record: `robot-hoi eval --out` records (one row per clip, grouped into tables by their "table") and
 sim2sim reports (`robot-hoi sim2sim`'s metrics.json, one row per clip and condition). A row's anchor is its file's
-name, so the README links a claim to `docs/results/README.md#<file stem>`.
+name, so the README links a claim to `docs/results/README.md#<file stem>`. A block in the top-level README between
+`<!-- results: STEM -->` and `<!-- /results -->` is filled with that record's rows the same way.
 """
 
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 from typing import Any
 
@@ -104,3 +106,24 @@ def render(records: list[tuple[str, dict[str, Any]]]) -> str:
     return "\n".join(lines)
 
 
+
+
+BLOCK = re.compile(r"(<!-- results: (?P<stem>[\w.-]+) -->\n).*?(<!-- /results -->)", re.S)
+
+
+def fill_blocks(text: str, records: list[tuple[str, dict[str, Any]]], source: str = "README.md") -> str:
+    """`text` with every `<!-- results: STEM -->` block holding the table of record STEM."""
+    by_stem = dict(records)
+
+    def table(match: re.Match) -> str:
+        stem = match["stem"]
+        if stem not in by_stem:
+            raise UserError(f"{source}: a results block names {stem!r}, which has no record in docs/results/data")
+        record = by_stem[stem]
+        sim2sim = "cells" in record
+        columns = SIM2SIM_COLUMNS if sim2sim else EVAL_COLUMNS
+        rows = sim2sim_rows(stem, record) if sim2sim else eval_rows(stem, record)
+        body = ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns), *rows]
+        return match.group(1) + "\n".join(body) + "\n" + match.group(3)
+
+    return BLOCK.sub(table, text)

@@ -137,25 +137,38 @@ def test_recipes_separate_only_with_two_seeds_apart_and_disjoint_intervals():
 
 
 @pytest.mark.slow
-def test_results_are_generated_from_records_and_checked(record, tmp_path):
+def test_results_are_generated_from_records_and_checked(record, tmp_path, capsys):
     data = tmp_path / "data"
     data.mkdir()
     (data / "untrained_push.json").write_text(json.dumps(record))
-    out = tmp_path / "README.md"
-    assert main(["results", "--data", str(data), "--out", str(out)]) == 0
+    out, readme = tmp_path / "README.md", tmp_path / "GUIDE.md"
+    readme.write_text("# guide\n<!-- results: untrained_push -->\nstale\n<!-- /results -->\nafter\n")
+    args = ["results", "--data", str(data), "--out", str(out), "--readme", str(readme)]
+    assert main(args) == 0
     text = out.read_text()
     assert "## baselines" in text and '<a id="untrained_push"></a>baseline' in text
-    assert main(["results", "--data", str(data), "--out", str(out), "--check"]) == 0
+    guide = readme.read_text()
+    assert "stale" not in guide and "| result | clip |" in guide and guide.endswith("<!-- /results -->\nafter\n")
+    assert main([*args, "--check"]) == 0
     (data / "untrained_push.json").write_text(json.dumps({**record, "label": "renamed"}))
-    assert main(["results", "--data", str(data), "--out", str(out), "--check"]) == 1
+    assert main([*args, "--check"]) == 1
+    readme.write_text("<!-- results: nothing_here -->\n<!-- /results -->\n")
+    capsys.readouterr()
+    assert main(args) == 2
+    assert "names 'nothing_here', which has no record" in capsys.readouterr().err
     (data / "broken.json").write_text("{")
     with pytest.raises(UserError, match="broken.json: not valid JSON"):
         load_records(data)
 
 
 def test_committed_results_are_what_their_records_give():
+    from robot_hoi.paths import REPO_ROOT
+    from robot_hoi.rl.results import fill_blocks
     from robot_hoi.rl.results_cli import RESULTS_DIR
 
     if not (RESULTS_DIR / "data").is_dir():
         pytest.skip("no docs/results/data in this checkout")
-    assert (RESULTS_DIR / "README.md").read_text() == render(load_records(RESULTS_DIR / "data"))
+    records = load_records(RESULTS_DIR / "data")
+    assert (RESULTS_DIR / "README.md").read_text() == render(records)
+    readme = (REPO_ROOT / "README.md").read_text()
+    assert readme == fill_blocks(readme, records)
