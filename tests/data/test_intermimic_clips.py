@@ -23,6 +23,7 @@ def _all_clips(motions):
     return sorted((motions / "clips").glob("*.pt")) + sorted((motions / "physics_corrected").glob("*.pt"))
 
 
+@pytest.mark.slow
 def test_every_reference_clip_loads_validates_and_inspects(motions, capsys):
     paths = _all_clips(motions)
     assert len(paths) == 8

@@ -83,6 +83,7 @@ def test_box_from_the_synthetic_clip(tmp_path, lift_clip):
     assert any(p.startswith("object 'tall_box': box") for p in loaded.problems)
 
 
+@pytest.mark.slow
 @pytest.mark.shared
 def test_shared_object_without_its_obj_inspects_retargets_and_trains(motions, tmp_path, capsys):
     """A copy of a shared object folder without the .obj (only URDF + sample points, as some OMOMO objects ship)."""

@@ -177,6 +177,7 @@ def test_rich_status_on_a_terminal(dev_policy):
     assert "HOLD" in shown and "POLICY" in shown and "faults none" in shown
 
 
+@pytest.mark.slow
 def test_slcan_stream_garbled_mid_policy_damps_with_a_summary_not_a_traceback(dev_policy, tmp_path, capsys):
     """Both hands behind one emulated slcan USB adapter (hands bench: real ports, body simulated)."""
     from deploy.hands.sim_slcan import SimulatedSlcanAdapter

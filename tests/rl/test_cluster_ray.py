@@ -21,6 +21,8 @@ from robot_hoi.rl.cluster import (
 )
 from robot_hoi.rl.teacher_job import PREEMPT_HOOK_ENV
 
+pytestmark = pytest.mark.slow  # Ray clusters (about 80 s)
+
 ray = pytest.importorskip("ray")
 
 LIFT, PUSH = "synth_lift_carry_seed0", "synth_push_seed0"

@@ -6,6 +6,8 @@ import io
 import subprocess
 import sys
 
+import pytest
+
 from robot_hoi.rl.progress import PlainProgress, progress_text, training_progress
 
 
@@ -43,6 +45,7 @@ def test_text_names_throughput_return_length_and_metrics():
                     "success_rate 0.5")
 
 
+@pytest.mark.slow
 def test_runner_under_a_pipe_prints_progress_lines(tmp_path):
     """What nohup or a batch system sees: the real runner with its stdout redirected to a file."""
     script = (

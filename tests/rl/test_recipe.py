@@ -94,6 +94,7 @@ class _Stop(Exception):
     pass
 
 
+@pytest.mark.slow
 def test_command_line_overrides_the_recipe_and_the_run_records_it(tmp_path, monkeypatch):
     """Flags and --set win over the recipe, the recipe over its base and the task config; the run folder's
     recipe.yaml holds the result and, trained again, gives the same configs."""

@@ -45,6 +45,7 @@ def _steps(folder) -> list[int]:
     return [json.loads(line)["step"] for line in (folder / SCALARS_FILE).read_text().splitlines()]
 
 
+@pytest.mark.slow
 def test_retry_resumes_with_what_is_left_and_resume_continues(job, tmp_path):
     folder = tmp_path / "push"
     first = train_teacher_group(job, log=lambda _: None)

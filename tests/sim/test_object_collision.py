@@ -14,6 +14,7 @@ from robot_hoi.sim.scene import OBJECT_BODY, add_object
 
 TOP_Z = 0.40  # the table_object fixture's top spans 0.40-0.45 m
 
+@pytest.mark.slow
 def test_a_table_decomposes_into_pieces_that_leave_room_under_its_top(table_object):
     table = table_object
 

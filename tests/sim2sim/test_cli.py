@@ -6,11 +6,14 @@ from __future__ import annotations
 import json
 import math
 
+import pytest
+
 from sim2sim.perturbations import SUITES
 
 METRICS = ("E_h_cm", "E_o_cm", "mpjpe_g_mm", "mpjpe_mm", "e_acc_mm", "e_vel_mm", "duration_s")
 
 
+@pytest.mark.slow
 def test_report_for_the_embedded_clip(e2e_report, exported_policy):
     data = json.loads((e2e_report / "metrics.json").read_text())
     assert data["format"] == "robot-hoi sim2sim report"
@@ -47,6 +50,7 @@ def test_report_for_the_embedded_clip(e2e_report, exported_policy):
         assert "no OpenGL backend" in data["render"]["message"]
 
 
+@pytest.mark.slow
 def test_compare_with_a_previous_run_and_a_second_policy(e2e_report, exported_policy, stand_policy, cli, tmp_path):
     result = cli(["sim2sim", "--policy", str(stand_policy), "--compare", str(e2e_report), "-o", "cmp", "--seconds",
                   "0.5", "--episodes", "1", "--videos", "0", "--perturbations", "nominal", "-q"], tmp_path)
@@ -67,6 +71,7 @@ def test_compare_with_a_previous_run_and_a_second_policy(e2e_report, exported_po
     assert len(data["episodes"]) == 2
 
 
+@pytest.mark.slow
 def test_user_errors_are_one_line(cli, tmp_path, exported_policy):
     cases = [
         (["sim2sim", "--policy", "missing.onnx"], "missing.onnx: policy file not found"),

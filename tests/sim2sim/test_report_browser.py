@@ -12,6 +12,8 @@ import subprocess
 import numpy as np
 import pytest
 
+pytestmark = pytest.mark.slow  # a full sim2sim report in headless Chromium
+
 FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
          "--disable-component-update", "--disable-sync", "--no-first-run", "--hide-scrollbars"]
 

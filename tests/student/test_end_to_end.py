@@ -4,6 +4,7 @@ check -> deploy dry run. Small networks and few envs keep it well under 90 s on 
 import json
 
 import numpy as np
+import pytest
 
 from deploy.contract import PolicyContract
 from deploy.motion import load_motion
@@ -13,6 +14,7 @@ from robot_hoi.student.checkpoint import load_student
 from .conftest import student_args
 
 
+@pytest.mark.slow
 def test_distil_export_check_and_dry_run(teacher_run, tmp_path, capsys):
     out = tmp_path / "student"
     assert main(student_args(teacher_run, out)) == 0

@@ -42,6 +42,7 @@ def test_student_eval_matches_the_runs_own_evaluation(student_run, capsys):
     assert report["overall"]["ours"]["E_h_cm"]["mean"] == pytest.approx(report["clips"][CLIP]["ours"]["E_h_cm"]["mean"])
 
 
+@pytest.mark.slow
 def test_student_eval_on_given_clips_and_as_a_table(student_run, capsys):
     ckpt = student_run / "student" / "model_1.pt"
     report = eval_json(capsys, ckpt, "--data", "embedded:lift_place")

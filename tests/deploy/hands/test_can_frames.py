@@ -99,6 +99,7 @@ PENDING = [
 ] + [Pending(RW_WRITE, 1486, 1, bytes(8)), Pending(RW_WRITE, 4016, 1, b"\x01")]
 
 
+@pytest.mark.slow
 @settings(max_examples=10_000, deadline=None, database=None, suppress_health_check=[HealthCheck.too_slow])
 @given(st.binary(max_size=14))
 def test_can_decoding_never_crashes_and_accepts_only_exact_replies(raw):

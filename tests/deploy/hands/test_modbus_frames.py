@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -67,6 +68,7 @@ def blob_to_reply(raw: bytes) -> bytes:
     return noise + read_reply(1, words + [0] * (6 - len(words)))
 
 
+@pytest.mark.slow
 @settings(max_examples=10_000, deadline=None, database=None, suppress_health_check=[HealthCheck.too_slow])
 @given(st.binary(max_size=40))
 def test_rtu_decoding_never_crashes_and_never_accepts_a_bad_crc(raw):
