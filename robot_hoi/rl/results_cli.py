@@ -10,7 +10,8 @@ from pathlib import Path
 
 from robot_hoi.paths import REPO_ROOT
 
-RESULTS_DIR = REPO_ROOT / "docs" / "results"
+ROOT = REPO_ROOT if REPO_ROOT is not None else Path()  # under an installed wheel: the checkout one works in
+RESULTS_DIR = ROOT / "docs" / "results"
 
 
 def register(subparsers) -> None:
@@ -18,7 +19,7 @@ def register(subparsers) -> None:
                               description=__doc__)
     p.add_argument("--data", default=str(RESULTS_DIR / "data"), help="folder of JSON records")
     p.add_argument("--out", default=str(RESULTS_DIR / "README.md"), help="the generated tables")
-    p.add_argument("--readme", default=str(REPO_ROOT / "README.md"),
+    p.add_argument("--readme", default=str(ROOT / "README.md"),
                    help="a guide whose results blocks are filled from the records")
     p.add_argument("--check", action="store_true", help="only check that --out is up to date (exit 1 if not)")
     p.set_defaults(func=run)
