@@ -19,6 +19,12 @@ import mujoco
 import torch
 from torch import Tensor
 
+from robot_hoi.utils.mujoco_model import with_body_mass
+
+# What a change of one body's mass changes in a compiled model (with_body_mass: the mass, the inertia and the
+# constants mj_setConst derives from them); select_body_mass writes these rows.
+MASS_FIELDS = ("body_mass", "body_subtreemass", "body_inertia", "body_invweight0", "dof_invweight0", "dof_M0")
+
 
 class PhysicsBackend(ABC):
     model: mujoco.MjModel
@@ -44,7 +50,8 @@ class PhysicsBackend(ABC):
 
     @abstractmethod
     def step(self, ctrl: Tensor, wrench: Tensor | None = None) -> None:
-        """Advance every environment by one control step with position targets `ctrl` (num_envs, nu). `wrench`
+        """Advance every environment by one control step with position targets `ctrl` (num_envs, nu), or one target
+        per physics sub-step (num_envs, decimation, nu): a delayed command takes effect within the step. `wrench`
         (num_envs, nbody, 6): world-frame force and torque at each body's centre of mass (MuJoCo's xfrc_applied),
         held over every physics sub-step of this control step; None applies none."""
 
@@ -53,15 +60,28 @@ class PhysicsBackend(ABC):
         """Overwrite the state of `env_ids` and recompute their sensors."""
 
     @abstractmethod
+    def write_model_fields(self, env_ids: Tensor, values: dict[str, Tensor]) -> None:
+        """Give the environments `env_ids` their own rows of MjModel arrays, from their next step: values[name] is
+        (len(env_ids), *model.<name>.shape). Fields: MASS_FIELDS and the backend's `variable_fields` (named when it
+        was made: the GPU backend gives them a row per world before it captures its graphs). Every environment
+        starts with the model's own values. No host sync where the physics runs on a GPU."""
+
     def set_body_mass_levels(self, body_id: int, masses: list[float]) -> None:
         """Prepare the masses (kg) body `body_id` may take (inertia scaled alike, derived constants recomputed:
-        utils.mujoco_model.with_body_mass); every environment starts at the model's own. Once, before `select_body_mass`;
-        one body per backend."""
+        utils.mujoco_model.with_body_mass). Once, before `select_body_mass`; one body per backend."""
+        variants = [with_body_mass(self.model, body_id, float(kg)) for kg in masses]
+        self._mass_levels = {name: torch.stack([torch.as_tensor(getattr(v, name)) for v in variants]).to(self.device)
+                             for name in self.mass_fields}
 
-    @abstractmethod
     def select_body_mass(self, env_ids: Tensor, levels: Tensor) -> None:
         """Give the environments `env_ids` the prepared masses `levels` (indices into set_body_mass_levels'
-        list), from their next step. No host sync where the physics runs on a GPU."""
+        list), from their next step."""
+        levels = levels.to(self.device)
+        self.write_model_fields(env_ids, {name: rows[levels] for name, rows in self._mass_levels.items()})
+
+    @property
+    def mass_fields(self) -> tuple[str, ...]:
+        return MASS_FIELDS
 
     # Each backend's __init__ sets these to tensors viewing the physics' own buffers: read without a copy.
     _qpos_t: Tensor

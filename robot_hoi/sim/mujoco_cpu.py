@@ -1,11 +1,14 @@
 """CPU physics backend: every environment stepped in C by `mujoco.rollout` on a persistent thread pool.
 
 Per control step: one rollout call of `decimation` physics steps for all environments. The state and sensor
-arrays are numpy buffers shared (zero-copy) with the torch views the environment reads.
+arrays are numpy buffers shared (zero-copy) with the torch views the environment reads. Environments share the
+model until one gets its own values (write_model_fields: domain randomisation); from then on each steps its own
+copy (rollout takes one model per environment).
 """
 
 from __future__ import annotations
 
+import copy
 import os
 
 import mujoco
@@ -15,7 +18,6 @@ from mujoco import rollout
 from torch import Tensor
 
 from robot_hoi.sim.backend import PhysicsBackend
-from robot_hoi.utils.mujoco_model import with_body_mass
 
 _STATE_SPEC = mujoco.mjtState.mjSTATE_FULLPHYSICS.value
 _CTRL_SPEC = mujoco.mjtState.mjSTATE_CTRL.value
@@ -38,7 +40,9 @@ def _state_slice(model: mujoco.MjModel, component: mujoco.mjtState) -> slice:
 
 
 class MujocoCpuBackend(PhysicsBackend):
-    def __init__(self, model: mujoco.MjModel, num_envs: int, decimation: int, nthread: int | None = None):
+    def __init__(self, model: mujoco.MjModel, num_envs: int, decimation: int, nthread: int | None = None,
+                 variable_fields: tuple[str, ...] = ()):
+        del variable_fields  # any field may vary: an environment's own model copy is made when it first does
         self.model = model
         self.num_envs = num_envs
         self.decimation = decimation
@@ -50,7 +54,7 @@ class MujocoCpuBackend(PhysicsBackend):
         self._kin_model = _zero_timestep_copy(model)
         self._models = [model] * num_envs  # rollout's fast path takes one model per environment
         self._kin_models = [self._kin_model] * num_envs
-        self._mass_levels: list[tuple[mujoco.MjModel, mujoco.MjModel]] = []  # set_body_mass_levels
+        self._own_models = False  # True once every environment has its own copies (write_model_fields)
 
         self.nstate = mujoco.mj_stateSize(model, _STATE_SPEC)
         self._qpos_slice = _state_slice(model, mujoco.mjtState.mjSTATE_QPOS)
@@ -83,7 +87,8 @@ class MujocoCpuBackend(PhysicsBackend):
 
     # ---- stepping ---------------------------------------------------------------------------------------------
     def step(self, ctrl: Tensor, wrench: Tensor | None = None) -> None:
-        self._ctrl_t.copy_(ctrl.detach()[:, None, :])  # converted to float64 and held over the sub-steps in one copy
+        # converted to float64 (and held over the sub-steps) in one copy
+        self._ctrl_t.copy_(ctrl.detach() if ctrl.dim() == 3 else ctrl.detach()[:, None, :])
         control, spec = self._ctrl, _CTRL_SPEC
         # Once wrenches were applied they are always passed (zeros when None): the pool's MjData keep
         # xfrc_applied between calls, and a stale one would keep pushing.
@@ -122,19 +127,20 @@ class MujocoCpuBackend(PhysicsBackend):
         )
         self._sensordata[ids] = sens_out[:, 0]
 
-    def set_body_mass_levels(self, body_id: int, masses: list[float]) -> None:
-        """One model copy (and its zero-timestep twin) per mass, shared by the envs that have it."""
-        self._mass_levels = [(variant, _zero_timestep_copy(variant))
-                             for variant in (with_body_mass(self.model, body_id, float(kg)) for kg in masses)]
-
-    def select_body_mass(self, env_ids: Tensor, levels: Tensor) -> None:
-        for i, level in zip(env_ids.tolist(), levels.tolist(), strict=True):  # resets only
-            self._models[i], self._kin_models[i] = self._mass_levels[level]
+    def write_model_fields(self, env_ids: Tensor, values: dict[str, Tensor]) -> None:
+        """Into each environment's own model copy and its zero-timestep twin (made on the first call)."""
+        if not self._own_models:
+            self._models = [copy.copy(self.model) for _ in range(self.num_envs)]
+            self._kin_models = [_zero_timestep_copy(m) for m in self._models]
+            self._own_models = True
+        rows = {name: value.detach().cpu().numpy() for name, value in values.items()}
+        for k, i in enumerate(env_ids.tolist()):  # resets only: one C model per environment, no batched write
+            for name, value in rows.items():
+                getattr(self._models[i], name)[...] = value[k]
+                getattr(self._kin_models[i], name)[...] = value[k]
 
 
 def _zero_timestep_copy(model: mujoco.MjModel) -> mujoco.MjModel:
-    import copy
-
     twin = copy.copy(model)
     twin.opt.timestep = 0.0
     return twin

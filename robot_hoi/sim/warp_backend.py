@@ -21,9 +21,8 @@ import torch
 from torch import Tensor
 
 from robot_hoi.errors import UserError
-from robot_hoi.sim.backend import PhysicsBackend
+from robot_hoi.sim.backend import MASS_FIELDS, PhysicsBackend
 from robot_hoi.sim.device import import_warp, resolve_physics
-from robot_hoi.utils.mujoco_model import with_body_mass
 
 # Per-world capacities. Contacts are pooled across worlds (one world may exceed this); constraint rows are not:
 # pyramidal condim-3 contacts take 4 rows each, plus joint limits and the hands' mimic equalities.
@@ -43,7 +42,7 @@ def _overflow_buffers(mjw) -> dict[int, str]:
 
 class MujocoWarpBackend(PhysicsBackend):
     def __init__(self, model: mujoco.MjModel, num_envs: int, decimation: int, device: str | None = None,
-                 nthread: int | None = None):
+                 nthread: int | None = None, variable_fields: tuple[str, ...] = ()):
         del nthread  # the CPU backend's knob; warp parallelises over worlds itself
         wp, mjw = import_warp()
         self._wp, self._mjw = wp, mjw
@@ -61,7 +60,7 @@ class MujocoWarpBackend(PhysicsBackend):
         mujoco.mj_forward(model, data)
         with wp.ScopedDevice(self._wp_device):
             self._m = mjw.put_model(model)
-            self._batch_mass_fields(model, num_envs)
+            self._batch_fields(model, num_envs, variable_fields)
             self._d = mjw.put_data(model, data, nworld=num_envs, nconmax=CONTACTS_PER_WORLD, njmax=CONSTRAINT_ROWS)
         view = wp.to_torch
         self._qpos_t, self._qvel_t = view(self._d.qpos), view(self._d.qvel)
@@ -72,32 +71,31 @@ class MujocoWarpBackend(PhysicsBackend):
         self._contact_world_t = view(self._d.contact.worldid)
         self._buffer_bits = _overflow_buffers(mjw)
         self.high_water = {"constraint_rows": 0, "contacts_per_world": 0}
-        self._step_graph = self._forward_graph = None
+        self._step_graph = self._forward_graph = self._substep_graph = None
         self.stepping = self._capture_graphs()
 
-    # Per-world mass properties (select_body_mass): MJWarp reads a field with a leading world axis per world.
-    _MASS_FIELDS = ("body_mass", "body_subtreemass", "body_inertia", "body_invweight0")
+    @property
+    def mass_fields(self) -> tuple[str, ...]:
+        return tuple(name for name in MASS_FIELDS if hasattr(self._m, name))  # MJWarp has no dof_M0
 
-    def _batch_mass_fields(self, model: mujoco.MjModel, num_envs: int) -> None:
-        """Give the mass fields one row per world before any graph is captured (later writes are in place)."""
+    def _batch_fields(self, model: mujoco.MjModel, num_envs: int, variable_fields: tuple[str, ...]) -> None:
+        """Give the mass fields and `variable_fields` one row per world before any graph is captured (MJWarp reads
+        a field with a leading world axis per world; later writes are in place)."""
         wp = self._wp
-        for name in self._MASS_FIELDS:
+        self._field_views: dict[str, Tensor] = {}
+        for name in dict.fromkeys((*self.mass_fields, *variable_fields)):
             field = getattr(self._m, name)
             rows = np.repeat(np.asarray(getattr(model, name), dtype=np.float32)[None], num_envs, axis=0)
             setattr(self._m, name, wp.array(rows, dtype=field.dtype))
-        self._mass_views = {name: wp.to_torch(getattr(self._m, name)) for name in self._MASS_FIELDS}
-        self._mass_levels: dict[str, Tensor] = {}  # set_body_mass_levels
+            self._field_views[name] = wp.to_torch(getattr(self._m, name))
 
-    def set_body_mass_levels(self, body_id: int, masses: list[float]) -> None:
-        """Each field's rows for every mass, on the device (selecting is then a device gather)."""
-        variants = [with_body_mass(self.model, body_id, float(kg)) for kg in masses]
-        self._mass_levels = {name: torch.stack([torch.as_tensor(getattr(v, name), dtype=torch.float32)
-                                                for v in variants]).to(self.device) for name in self._MASS_FIELDS}
-
-    def select_body_mass(self, env_ids: Tensor, levels: Tensor) -> None:
-        ids, levels = env_ids.to(self.device), levels.to(self.device)
-        for name, view in self._mass_views.items():
-            view[ids] = self._mass_levels[name][levels].reshape(view[ids].shape)
+    def write_model_fields(self, env_ids: Tensor, values: dict[str, Tensor]) -> None:
+        ids = env_ids.to(self.device)
+        for name, value in values.items():
+            if name not in self._field_views:
+                raise ValueError(f"model field {name} was not named in variable_fields when the backend was made")
+            view = self._field_views[name]
+            view[ids] = value.to(self.device, view.dtype).reshape(view[ids].shape)
 
     # ---- CUDA graphs ------------------------------------------------------------------------------------------
     def _capture_graphs(self) -> str:
@@ -121,8 +119,12 @@ class MujocoWarpBackend(PhysicsBackend):
                     self._physics_steps()
                 step_graph = capture.graph
                 with wp.ScopedCapture() as capture:
+                    mjw.step(self._m, self._d)
+                substep_graph = capture.graph
+                with wp.ScopedCapture() as capture:
                     mjw.forward(self._m, self._d)
                 self._step_graph, self._forward_graph = step_graph, capture.graph
+                self._substep_graph = substep_graph
             except Exception as exc:  # noqa: BLE001 - any capture failure leaves plain launches, which work
                 print(f"[warp] CUDA graph capture failed ({type(exc).__name__}: {exc}); launching kernels instead",
                       flush=True)
@@ -138,7 +140,8 @@ class MujocoWarpBackend(PhysicsBackend):
             self._mjw.step(self._m, self._d)
 
     def step(self, ctrl: Tensor, wrench: Tensor | None = None) -> None:
-        self._ctrl_t.copy_(ctrl.detach())
+        per_substep = ctrl.dim() == 3  # one target per sub-step (a delayed command): one launch per sub-step
+        self._ctrl_t.copy_(ctrl.detach()[:, 0] if per_substep else ctrl.detach())
         if wrench is not None or self._wrench_applied:  # xfrc_applied persists in the worlds: clear it once
             if wrench is None:
                 self._xfrc_t.zero_()
@@ -146,7 +149,15 @@ class MujocoWarpBackend(PhysicsBackend):
                 self._xfrc_t.copy_(wrench.detach().reshape(self._xfrc_t.shape))
             self._wrench_applied = wrench is not None
         with self._wp.ScopedDevice(self._wp_device):
-            if self._step_graph is not None:
+            if per_substep:
+                for j in range(self.decimation):
+                    if j:
+                        self._ctrl_t.copy_(ctrl.detach()[:, j])
+                    if self._substep_graph is not None:
+                        self._wp.capture_launch(self._substep_graph)
+                    else:
+                        self._mjw.step(self._m, self._d)
+            elif self._step_graph is not None:
                 self._wp.capture_launch(self._step_graph)
             else:
                 self._physics_steps()

@@ -20,6 +20,7 @@ from robot_hoi.errors import UserError
 from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg
 from robot_hoi.tasks.interaction.mdp import assist as assist_terms
 from robot_hoi.tasks.interaction.mdp import observations as obs_terms
+from robot_hoi.tasks.interaction.mdp import randomization as dr
 from robot_hoi.tasks.interaction.mdp import rewards as reward_terms
 from robot_hoi.tasks.interaction.mdp import terminations as term_terms
 from robot_hoi.tasks.interaction.psi import PsiBuffer
@@ -80,8 +81,9 @@ class InteractionEnv:
         self.cfg = cfg
         self.scene = scene
         self.num_envs = cfg.num_envs
+        dr.check(cfg.randomization)
         self.backend = scene.make_backend(cfg.num_envs, backend=cfg.backend, nthread=cfg.nthread,
-                                          device=cfg.sim_device)
+                                          device=cfg.sim_device, variable_fields=dr.variable_fields(cfg.randomization))
         self.device = self.backend.device  # every env tensor lives where the physics state is
         self.dt = self.backend.control_dt
         self.generator = torch.Generator(device=self.device).manual_seed(cfg.seed)
@@ -114,6 +116,7 @@ class InteractionEnv:
         if self.object_mass_levels is not None:
             self.backend.set_body_mass_levels(scene.object_body_id(), self.object_mass_levels.tolist())
             self.object_mass_levels = self.object_mass_levels.to(self.device)
+        self.randomization = dr.DomainRandomization(cfg.randomization, self, obs_terms.STUDENT_NOISE)
         self.assist_level = assist_terms.assist_level(cfg.assist, 0)
         self.feet_link_mask = torch.zeros(layout.num_links, device=self.device)
         self.feet_link_mask[scene.feet_link_ids] = 1.0
@@ -198,7 +201,9 @@ class InteractionEnv:
         if self.cfg.init.grip_settle_frames > 0:
             settle = assist_terms.grip_settle_wrench(self)
             wrench = settle if wrench is None else wrench + settle
-        self.backend.step(torch.maximum(torch.minimum(targets, self.ctrl_high), self.ctrl_low), wrench)
+        ctrl = self.randomization.delayed(torch.maximum(torch.minimum(targets, self.ctrl_high), self.ctrl_low))
+        self.randomization.push(self.dt)
+        self.backend.step(ctrl, wrench)
         timers.lap("physics")
         self.grip_settle_left = (self.grip_settle_left - 1).clamp(min=0)
         self.episode_length += 1
@@ -476,6 +481,8 @@ class InteractionEnv:
         self.prev_link_vel[env_ids] = self.link_vel[env_ids]
         self.prev_object_vel[env_ids] = self.object_lin_vel[env_ids]
         self.psi.on_reset(env_ids)
+        hold = torch.maximum(torch.minimum(self.joint_pos[env_ids], self.ctrl_high), self.ctrl_low)
+        self.randomization.reset(env_ids, hold)  # after every other draw: configs without it keep their stream
 
     def _random_frames(self, clip: Tensor) -> Tensor:
         lo, hi = self.cfg.init.start_range

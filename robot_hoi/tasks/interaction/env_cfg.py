@@ -99,11 +99,44 @@ class AssistCfg:
 
 @dataclass
 class RandomizationCfg:
-    """Per-episode domain randomisation in training (evaluation uses the same keys to test one setting)."""
+    """Per-episode domain randomisation in training (evaluation uses the same keys to test one setting).
+
+    Every value is drawn per environment at its reset from the env's generator (mdp/randomization.py); a range
+    at its neutral value is off and makes no draw, so a config without it trains exactly as before. Ranges are
+    uniform unless said otherwise. configs/recipes/hardware.yaml turns on what a policy for the robot needs."""
 
     # Object mass x scale, drawn log-uniform per episode on a 2 % grid (inertia scaled alike). (1, 1) = off.
     # A policy trained at exactly the clip's mass drops the box at x0.5 and at x2 (sim2sim robust suite).
     object_mass_scale: tuple[float, float] = (1.0, 1.0)
+    # x the object's sliding friction (every contact it makes: its geoms have priority). Real boxes are
+    # cardboard, plastic, wood; sim2sim checks x0.5 and x1.5.
+    object_friction_scale: tuple[float, float] = (1.0, 1.0)
+    # x the floor's and the robot's sliding friction (a foot-floor contact takes the larger of the two, so both
+    # scale): floors differ from lab to lab (BeyondMimic trains 0.3-1.6).
+    floor_friction_scale: tuple[float, float] = (1.0, 1.0)
+    # x the body motors' PD stiffness and damping (position actuators' gains; the Inspire hands run their own
+    # loop): the G1's drivers do not apply exactly the commanded kp/kd; sim2sim checks x0.7 and x1.3.
+    kp_scale: tuple[float, float] = (1.0, 1.0)
+    kd_scale: tuple[float, float] = (1.0, 1.0)
+    # s: each PD target reaches the motors this late (rounded to physics steps, 4.8 ms on the G1): DDS and the
+    # motor drivers add latency on the robot; sim2sim checks 20 ms.
+    actuator_delay_s: tuple[float, float] = (0.0, 0.0)
+    # m/s: a push adds a uniform draw in [-v, v] to the pelvis's x and y velocity, every push_interval_s (drawn
+    # per push); 0 = no pushes. People and cables bump the robot (BeyondMimic pushes every 1-3 s).
+    push_velocity: float = 0.0
+    push_interval_s: tuple[float, float] = (1.0, 3.0)
+    # m, half-widths per axis (x, y, z) of a uniform offset of the torso's centre of mass: battery, cabling and
+    # payload move it on real robots (BeyondMimic: 2.5 / 5 / 5 cm).
+    torso_com_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    # Observation noise (normal std, drawn every step) on the deployable (student) observation only, whose terms
+    # model the robot's sensors; the teachers' privileged observation stays exact (their actions are the
+    # student's labels). Defaults of the hardware recipe = sim2sim's sensor_noise condition.
+    joint_pos_noise: float = 0.0    # rad, encoders (joint_pos)
+    joint_vel_noise: float = 0.0    # rad/s (joint_vel)
+    imu_rot_noise: float = 0.0      # rad, IMU orientation (projected_gravity)
+    gyro_noise: float = 0.0         # rad/s (base_ang_vel)
+    tracker_pos_noise: float = 0.0  # m, mocap positions (object_pos and every ref_* position relative to the pelvis)
+    tracker_rot_noise: float = 0.0  # rad, mocap orientations (object_rot, ref_root_rot, ref_object_rot)
 
 
 @dataclass

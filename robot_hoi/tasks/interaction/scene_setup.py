@@ -74,9 +74,10 @@ class InteractionScene:
         )
 
     def make_backend(self, num_envs: int, backend: str = "cpu", nthread: int | None = None,
-                     device: str | None = None):
+                     device: str | None = None, variable_fields: tuple[str, ...] = ()):
+        """`variable_fields`: MjModel arrays each environment may get its own values of (domain randomisation)."""
         return make_backend(backend, self.model, num_envs, self.embodiment.decimation, nthread=nthread,
-                            device=device)
+                            device=device, variable_fields=variable_fields)
 
     def actuator_ctrlrange(self) -> tuple[np.ndarray, np.ndarray]:
         ids = [mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_ACTUATOR, n) for n in self.layout.actuator_names]

@@ -270,8 +270,19 @@ STUDENT_TERMS = {
 }
 
 
+# The sensor noise (env_cfg.RandomizationCfg key) each deployable term carries in training: encoders, IMU, mocap
+# (a pelvis pose error moves every position relative to the pelvis; modelled as independent noise per entry).
+STUDENT_NOISE = {
+    "projected_gravity": "imu_rot_noise", "base_ang_vel": "gyro_noise", "joint_pos": "joint_pos_noise",
+    "joint_vel": "joint_vel_noise", "object_pos": "tracker_pos_noise", "object_rot": "tracker_rot_noise",
+    "ref_root_pos": "tracker_pos_noise", "ref_link_pos": "tracker_pos_noise", "ref_object_pos": "tracker_pos_noise",
+    "ref_root_rot": "tracker_rot_noise", "ref_object_rot": "tracker_rot_noise",
+}
+
+
 def student_observation(env) -> Tensor:
-    return torch.cat([STUDENT_TERMS[name](env) for name in env.cfg.student_obs_terms], dim=-1)
+    return torch.cat([env.randomization.noisy(name, STUDENT_TERMS[name](env)) for name in env.cfg.student_obs_terms],
+                     dim=-1)
 
 
 def student_observation_spec(env) -> list[dict]:
