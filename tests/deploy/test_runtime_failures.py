@@ -63,9 +63,12 @@ class AfterSteps:
 def test_disk_full_during_policy_still_damps_and_reports_what_was_lost(dev_policy, tmp_path, monkeypatch):
     rig = RuntimeRig(dev_policy, log_dir=tmp_path, safety=SafetyConfig(**FAST))
 
+    def no_space(*args, **kwargs):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
     def disk_fills_and_a_hand_faults():
         rig.events._file = FullDisk()
-        monkeypatch.setattr("deploy.runlog.atomic_write_bytes", FullDisk().write)
+        monkeypatch.setattr("deploy.runlog.atomic_write_bytes", no_space)
         rig.right.error_bits[1] = 1  # locked rotor: a fault that must damp while nothing can be logged
 
     rig.runtime.policy = AfterSteps(rig.policy, 20, disk_fills_and_a_hand_faults)
@@ -76,6 +79,7 @@ def test_disk_full_during_policy_still_damps_and_reports_what_was_lost(dev_polic
     assert logs["events"]["errors"] > 0 and logs["events"]["lost"] > 0
     assert "No space left on device" in logs["events"]["last_error"]
     assert logs["ticks"]["errors"] > 0 and logs["ticks"]["lost"] > 0
+    assert "No space left on device" in logs["ticks"]["last_error"]
     assert len(rig.events.of_kind("fault")) == 1  # still kept in memory for the summary
 
 
