@@ -14,6 +14,7 @@ EPILOG = """examples:
   robot-hoi export onnx --untrained -o policies/untrained.onnx
   robot-hoi sim2sim --policy policies/untrained.onnx -o reports/untrained
   robot-hoi sim2sim --policy policies/student.onnx --suite robust --episodes 5 -o reports/student-robust
+  robot-hoi sim2sim --policy policies/student.onnx --suite hardware -o reports/student-hardware
   robot-hoi sim2sim --policy policies/student.onnx --compare policies/student_v2.onnx -o reports/v1-vs-v2
   robot-hoi sim2sim --policy policies/student.onnx --compare reports/student-robust -o reports/again
   robot-hoi sim2sim --policy P.onnx --clips ../shared/reference/motions/clips/sub3_largebox_003.pt
@@ -37,11 +38,14 @@ def register(subparsers) -> None:
     p.add_argument("--clips", nargs="+", default=None, metavar="CLIP",
                    help="evaluate on these clips (files, folders or embedded:lift_carry), retargeted as in training")
     add_clip_options(p)
-    p.add_argument("--suite", default="default", choices=("nominal", "default", "robust"),
-                   help="nominal only; default = nominal + a few; robust = the full perturbation grid")
+    p.add_argument("--suite", default="default", choices=("nominal", "default", "robust", "hardware"),
+                   help="nominal only; default = nominal + a few; robust = the full perturbation grid; hardware = "
+                        "what the robot meets, READY only when every condition reaches --ready-success over "
+                        "16+ episodes")
     p.add_argument("--perturbations", nargs="+", default=None, metavar="NAME",
                    help="run only these perturbations (any suite's names, e.g. object_mass_x10 push_0.3)")
-    p.add_argument("--episodes", type=int, default=3, help="episodes per clip and perturbation (default 3)")
+    p.add_argument("--episodes", type=int, default=None,
+                   help="episodes per clip and perturbation (default 3; 16 for --suite hardware)")
     p.add_argument("-o", "--output", default=None, help="report folder (default reports/sim2sim-<time>)")
     p.add_argument("--compare", default=None, metavar="POLICY_OR_RUN",
                    help="a second .onnx policy to evaluate alongside, or a previous report folder / metrics.json")
@@ -72,12 +76,17 @@ def register(subparsers) -> None:
 
 def handler(args: argparse.Namespace) -> int:
     from sim2sim.evaluate import Sim2SimOptions, evaluate
+    from sim2sim.perturbations import EVERY_CONDITION_SUITES
     from sim2sim.report import fmt_rtf
     from sim2sim.verdict import ReadyThresholds
 
+    episodes = args.episodes
+    if episodes is None:  # a verdict on every condition needs its episodes (ReadyThresholds.min_episodes)
+        episodes = ReadyThresholds.min_episodes if args.suite in EVERY_CONDITION_SUITES and not args.perturbations \
+            else 3
     options = Sim2SimOptions(
         policy=args.policy, motion=args.motion, clips=args.clips, suite=args.suite,
-        perturbations=args.perturbations, episodes=args.episodes, output=args.output, compare=args.compare,
+        perturbations=args.perturbations, episodes=episodes, output=args.output, compare=args.compare,
         workers=args.workers, seconds=args.seconds, hand_transport=args.hand_bus, hand_link=args.hand_link,
         embodiment=args.embodiment, videos=args.videos, seed=args.seed, self_collision=not args.no_self_collision,
         tracker_rate_hz=args.tracker_rate, quiet=args.quiet, argv=sys.argv[1:], clip_options=clip_options(args),

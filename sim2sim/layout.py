@@ -48,7 +48,8 @@ class WorldLayout:
     hand_contact_adr: np.ndarray  # (2,) sensordata address of left/right hand-object contact 'found'
     finger_force_adr: np.ndarray  # (12,) sensordata address of each channel's contact force xyz
     gantry_eq: int
-    friction_geoms: np.ndarray  # floor and object geoms (friction perturbations)
+    friction_geoms: np.ndarray  # floor, robot and object geoms (friction perturbations: a foot-floor contact takes
+                                # the larger of its two geoms' friction, so the robot's scale with the floor's)
     robot_mass: float
 
     @classmethod
@@ -95,6 +96,7 @@ class WorldLayout:
             hand_contact_adr=np.array([sensor("contact_left_hand"), sensor("contact_right_hand")]),
             finger_force_adr=np.array(finger_force),
             gantry_eq=_id(model, obj.mjOBJ_EQUALITY, GANTRY),
-            friction_geoms=np.array([_id(model, obj.mjOBJ_GEOM, FLOOR_GEOM), *object_geoms]),
+            friction_geoms=np.array([_id(model, obj.mjOBJ_GEOM, FLOOR_GEOM), *object_geoms,
+                                     *(g for g in range(model.ngeom) if model.geom_bodyid[g] in robot_bodies)]),
             robot_mass=float(model.body_mass[robot_bodies].sum()),
         )

@@ -2,7 +2,8 @@
 
 A Perturbation changes one thing about the world the runtime meets (or a few, for "combined"); every field's
 neutral value leaves the nominal world unchanged. `--suite default` = nominal + a few that catch the usual
-sim-to-real gaps; `--suite robust` = the full grid.
+sim-to-real gaps; `--suite robust` = the full grid; `--suite hardware` = what a policy for the robot must survive,
+judged condition by condition (sim2sim.verdict: every one at the success threshold over 16+ episodes).
 """
 
 from __future__ import annotations
@@ -85,7 +86,14 @@ SUITES: dict[str, tuple[str, ...]] = {
     "default": ("nominal", "object_mass_x10", "actuator_latency_20ms", "sensor_noise", "push_0.3"),
     "robust": tuple(ALL),
     "nominal": ("nominal",),
+    # what the robot meets: the object's mass and the friction it finds, motor-driver latency and gain mismatch,
+    # sensor noise, mocap latency, pushes, and several at once (configs/recipes/hardware.yaml trains for them)
+    "hardware": ("nominal", "object_mass_x0.5", "object_mass_x2", "friction_x0.5", "friction_x1.5",
+                 "actuator_latency_20ms", "pd_gains_x0.7", "pd_gains_x1.3", "sensor_noise", "tracker_latency_30ms",
+                 "push_0.6", "combined"),
 }
+# Suites whose verdict judges every condition (not only nominal), each over at least ReadyThresholds.min_episodes
+EVERY_CONDITION_SUITES = ("hardware",)
 
 
 def resolve_suite(suite: str, only: list[str] | None = None) -> list[Perturbation]:

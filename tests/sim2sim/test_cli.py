@@ -110,3 +110,26 @@ def test_min_success_gate_and_crashed_episodes_set_the_exit_code(monkeypatch, tm
         monkeypatch.setattr(evaluate_module, "evaluate", lambda options, r=rate, e=errors: fake_report(r, e))
         assert args.func(args) == code, (rate, errors)
     assert "crashed" in capsys.readouterr().err
+
+
+def test_the_hardware_suite_runs_16_episodes_per_condition_unless_told(monkeypatch):
+    import argparse
+
+    import sim2sim.evaluate as evaluate_module
+    from sim2sim import cli as sim2sim_cli
+
+    seen = []
+
+    def capture(options):
+        seen.append(options.episodes)
+        raise SystemExit(0)
+
+    monkeypatch.setattr(evaluate_module, "evaluate", capture)
+    parser = argparse.ArgumentParser()
+    sim2sim_cli.register(parser.add_subparsers())
+    for argv in (["--suite", "hardware"], ["--suite", "hardware", "--episodes", "20"], ["--suite", "robust"],
+                 ["--suite", "hardware", "--perturbations", "push_0.6"]):
+        args = parser.parse_args(["sim2sim", "--policy", "p.onnx", *argv])
+        with pytest.raises(SystemExit):
+            args.func(args)
+    assert seen == [16, 20, 3, 3]

@@ -52,6 +52,22 @@ def test_suites_resolve():
     assert set(SUITES["default"]) <= set(ALL)
 
 
+def test_hardware_suite_holds_what_the_robot_meets():
+    hardware = {p.name: p for p in resolve_suite("hardware")}
+    assert list(hardware)[0] == "nominal" and len(hardware) == 12
+    changed = {name: p.changes() for name, p in hardware.items()}
+    assert changed["object_mass_x0.5"] == {"object_mass_scale": 0.5} and changed["object_mass_x2"] == {
+        "object_mass_scale": 2.0}
+    assert changed["friction_x0.5"] == {"friction_scale": 0.5} and changed["friction_x1.5"] == {"friction_scale": 1.5}
+    assert changed["actuator_latency_20ms"] == {"actuator_latency_s": 0.02}
+    assert changed["pd_gains_x0.7"] == {"kp_scale": 0.7, "kd_scale": 0.7}
+    assert changed["pd_gains_x1.3"] == {"kp_scale": 1.3, "kd_scale": 1.3}
+    assert changed["tracker_latency_30ms"] == {"tracker_latency_s": 0.03}
+    assert changed["push_0.6"] == {"push_dv": 0.6}
+    assert {"joint_pos_noise", "gyro_noise", "tracker_rot_noise"} <= set(changed["sensor_noise"])
+    assert len(changed["combined"]) > 3  # several at once
+
+
 def test_changes_lists_only_what_differs():
     assert NOMINAL.changes() == {}
     assert ALL["object_mass_x10"].changes() == {"object_mass_scale": 10.0}

@@ -56,6 +56,46 @@ def test_reaching_the_end_without_the_object_is_not_ready():
     assert "interaction success:" in table.note
 
 
+def _hardware_report(success_by_condition, episodes=16):
+    from sim2sim.perturbations import SUITES
+
+    cells = []
+    for name in SUITES["hardware"]:
+        cell = _cell(name, success_by_condition.get(name, 1.0))
+        # nominal gates interaction success too; the perturbed conditions report it beside success
+        cell["episodes"], cell["interaction_success_rate"] = episodes, 1.0 if name == "nominal" else 0.5
+        cells.append(cell)
+    report = _report(cells)
+    report["suite"] = "hardware"
+    report["perturbations"] = [{"name": n, "description": "", "changes": {}} for n in SUITES["hardware"]]
+    return report
+
+
+def test_hardware_suite_is_ready_only_when_every_condition_succeeds_over_16_episodes():
+    v = verdict(_hardware_report({}))
+    assert v["ready"] and verdict_lines(v)[0].startswith("READY: A meets every threshold in every condition of the "
+                                                         "hardware suite")
+    assert sum("over 16 episodes (interaction 0.50)" in line for _, line in v["checks"]) == 11  # reported beside
+    # one condition below the threshold: not ready, and the line names it
+    v = verdict(_hardware_report({"push_0.6": 0.75}))
+    lines = verdict_lines(v)
+    assert not v["ready"] and lines[0].startswith("NOT READY: A misses 1 threshold(s) in every condition")
+    assert lines[1] == ("box push_0.6: success 0.75 over 16 episodes (interaction 0.50) (needs >= 0.8 over >= 16 "
+                        "episodes, --ready-success RATE, --episodes N)")
+    # too few episodes: not ready, however well they went
+    v = verdict(_hardware_report({}, episodes=8))
+    assert not v["ready"] and sum(not ok for ok, _ in v["checks"]) == 12
+    # a condition missing from the report fails
+    report = _hardware_report({})
+    report["cells"] = [c for c in report["cells"] if c["perturbation"] != "combined"]
+    v = verdict(report)
+    assert not v["ready"] and any(line == "box combined: not evaluated" for ok, line in v["checks"] if not ok)
+    # other suites keep judging the nominal condition only
+    report = _hardware_report({"push_0.6": 0.0})
+    report["suite"] = "robust"
+    assert verdict(report)["ready"]
+
+
 def test_tables_define_metrics_mark_untouched_objects_and_unapplied_pushes():
     report = _report([_cell("nominal", 0.0, touched=0), _cell("push_0.3", 0.0, pushes=0)])
     table = result_tables(report)[0]

@@ -107,6 +107,22 @@ def test_model_perturbations(make_world, target):
     np.testing.assert_allclose(slippery.model.geom_friction[geoms, 0], 0.5 * nominal.model.geom_friction[geoms, 0])
 
 
+def test_friction_perturbation_reaches_the_feet(make_world):
+    """A foot-floor contact (equal priorities) takes the larger of the two geoms' friction: scaling the floor
+    alone left the feet's friction where it was."""
+    nominal, slippery = make_world(), make_world(ALL["friction_x0.5"])
+    m = nominal.model
+    floor = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, "floor")
+    feet = [g for g in range(m.ngeom) if "ankle_roll" in (m.body(m.geom_bodyid[g]).name or "")]
+    assert feet and (m.geom_priority[feet] == m.geom_priority[floor]).all()
+
+    def contact(world):
+        f = world.model.geom_friction[:, 0]
+        return np.maximum(f[feet], f[floor])
+
+    np.testing.assert_allclose(contact(slippery), 0.5 * contact(nominal))
+
+
 def test_pushes_after_release(make_world, contract):
     world = make_world(replace(NOMINAL, push_dv=0.5, push_interval_s=(0.2, 0.2)))
     _command(world, contract)
