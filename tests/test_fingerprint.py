@@ -3,6 +3,7 @@
 import dataclasses
 
 import numpy as np
+import pytest
 
 from robot_hoi.utils.fingerprint import fingerprint
 
@@ -27,6 +28,7 @@ def test_equal_content_equal_digest_and_any_change_differs():
     assert fingerprint((1, 2)) != fingerprint([1, 2])
 
 
+@pytest.mark.slow
 def test_retargets_are_memoised_by_content_and_handed_out_as_copies(monkeypatch):
     from robot_hoi.data.synth import default_clip
     from robot_hoi.embodiment import load_embodiment

@@ -259,6 +259,7 @@ def test_the_reference_clock_does_not_jump_after_a_late_tick(dev_policy):
     assert stall.ticks == list(range(len(stall.ticks)))  # one reference frame per policy step, none skipped
 
 
+@pytest.mark.slow
 def test_gc_is_off_during_policy_and_restored_after(dev_policy):
     import gc
 

@@ -11,6 +11,7 @@ from robot_hoi.cli import main
 from robot_hoi.retarget.motion import RobotMotion
 
 
+@pytest.mark.slow
 def test_default_clip_json_report_motion_and_video(tmp_path, capsys):
     out = tmp_path / "motion.npz"
     video = tmp_path / "motion.mp4"
@@ -58,6 +59,7 @@ def test_bad_video_flags(tmp_path, capsys, flag):
     assert main(["retarget", "-o", str(tmp_path / "m.npz"), *flag]) == 2
 
 
+@pytest.mark.slow
 def test_a_folder_of_clips_prints_one_feasibility_table(tmp_path, capsys):
     """One row per clip with its physics-gate verdict; a clip that does not load is a row saying why."""
     from robot_hoi.data.synth import embedded_clip

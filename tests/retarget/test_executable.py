@@ -243,6 +243,7 @@ def test_leg_load_offsets_carry_a_crouched_robot_on_its_feet():
     assert sag(load_offsets(model, qpos[None], legs, {}, (sole_body, sole_local))[0]) < 0.01
 
 
+@pytest.mark.slow
 def test_hold_test_starts_just_before_the_grip_not_at_the_walk_up(monkeypatch):
     """From frame 0, the zero-residual replay of lift_carry had to survive a 1.2 m walk-up first and fell before the
     hands ever held the box (0 held frames): the test said nothing about the grasp. The root is held in the replay:

@@ -94,6 +94,7 @@ def test_update_changes_both_networks_and_reports_losses():
     )
 
 
+@pytest.mark.slow
 def test_extra_actor_loss_hook_is_applied():
     """With the PPO surrogate weighted to 0, only the hook can move the actor: it must pull the mean to a target."""
     target = torch.tensor([0.5, -0.25])

@@ -192,6 +192,7 @@ def test_interrupt_saves_a_checkpoint_and_reraises(tmp_path):
     assert read_checkpoint(tmp_path / "model_2.pt")["iteration"] == 2
 
 
+@pytest.mark.slow
 def test_update_runs_on_the_physics_threads_and_the_rollout_keeps_its_own():
     """The PPO update takes the physics pool's threads (idle while it runs), the rollout keeps torch's setting."""
     from types import SimpleNamespace

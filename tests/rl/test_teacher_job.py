@@ -68,6 +68,7 @@ def test_retry_resumes_with_what_is_left_and_resume_continues(job, tmp_path):
     assert json.loads((folder / EVAL_FILE).read_text())["checkpoint"] == "model_4.pt"
 
 
+@pytest.mark.slow
 def test_init_starts_a_new_run_from_another_runs_policy(job, tmp_path):
     from robot_hoi.rl.checkpoint import read_checkpoint
 

@@ -43,6 +43,7 @@ def test_option_presets_set_what_they_say():
         option_overrides("nope")
 
 
+@pytest.mark.slow
 def test_complexmimic_run(teacher_run, tmp_path, capsys):
     out = tmp_path / "cm"
     assert main(student_args(teacher_run, out, "--option", "complexmimic", "--set", "complexmimic.update_every=1",
@@ -67,6 +68,7 @@ def test_complexmimic_run(teacher_run, tmp_path, capsys):
     export_and_check(latest_checkpoint(out / "student"), tmp_path / "cm.onnx", capsys)
 
 
+@pytest.mark.slow
 def test_skillmimic_run_and_export_refusal(teacher_run, tmp_path, capsys):
     out = tmp_path / "sm"
     assert main(student_args(teacher_run, out, "--option", "skillmimic_v2", "--set",
