@@ -28,14 +28,17 @@ def test_shipped_student_meets_the_contract_and_carries_its_reference():
 
 
 @shipped_student
+@pytest.mark.slow
 def test_shipped_student_lifts_the_box_in_sim2sim(tmp_path):
     from robot_hoi.cli import main
 
+    # 32 of 32 sim2sim episodes (each from its own seeded spawn) completed it with interaction success (Wilson 95 %
+    # interval 0.89-1.00; docs/results/README.md#shipped_student_sim2sim): 6 of 8 sits below that interval
     out = tmp_path / "report"
-    assert main(["sim2sim", "--policy", str(SHIPPED), "--suite", "nominal", "--episodes", "1", "--videos", "0",
+    assert main(["sim2sim", "--policy", str(SHIPPED), "--suite", "nominal", "--episodes", "8", "--videos", "0",
                  "-q", "-o", str(out)]) == 0
     cell = json.loads((out / "metrics.json").read_text())["cells"][0]
-    assert cell["success_rate"] == 1.0 and cell["interaction_success_rate"] == 1.0
+    assert cell["episodes"] == 8 and cell["success_rate"] >= 0.75 and cell["interaction_success_rate"] >= 0.75
 
 
 @shipped_student
