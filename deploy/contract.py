@@ -38,6 +38,9 @@ unquoted string is accepted too)
                                                the target offset glides from default_pose (tick 0) to frame 0's
                                                joints, warmup_offset(); false: frame 0's joints from tick 0
     data                {"clips": [...], "license": str}
+    tracker             ["robot"[, "object"]]  optional: the poses the policy reads from the pose tracker (mocap);
+                                               [] = none, the runtime opens no tracker. Derived from obs_spec
+                                               (tracked_poses); a file whose value disagrees is refused
     task                {"env": {...}} | null  optional, default null: the training task's environment config
                                                (robot_hoi's InteractionEnvCfg as a dict: object density, friction
                                                and collision shape, termination thresholds, success bounds), so a
@@ -136,9 +139,22 @@ OBS_TERMS: dict[str, Callable[[_Dims], int]] = {
     "ref_link_pos": lambda d: 3 * d.links * d.keyframes,
     "ref_object_pos": lambda d: 3 * d.keyframes,
     "ref_object_rot": lambda d: 6 * d.keyframes,
+    "ref_root_local": lambda d: 9 * d.keyframes,
 }
 REFERENCE_TERMS = tuple(name for name in OBS_TERMS if name.startswith("ref_"))
 OBJECT_TERMS = ("object_pos", "object_rot")
+# Terms that read the tracked pelvis pose (its heading, or positions relative to it); the object terms read both.
+# A policy without any of them needs no pose tracker (deploy.observations states each term's inputs).
+PELVIS_TERMS = (*OBJECT_TERMS, "ref_root_pos", "ref_root_rot", "ref_link_pos", "ref_object_pos", "ref_object_rot")
+
+
+def tracked_poses(term_names) -> tuple[str, ...]:
+    """The poses a policy observing `term_names` needs from the pose tracker: (), ("robot",) or ("robot",
+    "object")."""
+    names = set(term_names)
+    if not names & set(PELVIS_TERMS):
+        return ()
+    return ("robot", "object") if names & set(OBJECT_TERMS) else ("robot",)
 
 
 @dataclass(frozen=True)
@@ -206,6 +222,14 @@ class PolicyContract:
         """Whether the policy observes the tracked object (ref_object_* come from the motion, not the tracker)."""
         return any(t.name in OBJECT_TERMS for t in self.obs_spec)
 
+    @property
+    def tracked_poses(self) -> tuple[str, ...]:
+        return tracked_poses(self.obs_names)
+
+    @property
+    def needs_tracker(self) -> bool:
+        return bool(self.tracked_poses)
+
     def hand_slice(self, side: str) -> slice:
         """Actuator indices of one hand's 6 channel joints (left, then right, after the body)."""
         start = self.num_body + HAND_DOF * HAND_SIDES.index(side)
@@ -261,6 +285,7 @@ class PolicyContract:
             "action_offset_mode": self.action_offset_mode,
             "warmup_frames": int(self.warmup_frames),
             "warmup_blend": bool(self.warmup_blend),
+            "tracker": list(self.tracked_poses),
         }
         if self.task is not None:
             values["task"] = self.task
@@ -413,6 +438,10 @@ def _parse(metadata: dict[str, str], source: str) -> PolicyContract:
     blend = _optional_json(metadata, "warmup_blend", False, fail)
     if not isinstance(blend, bool):
         raise fail("warmup_blend", f"must be true or false, got {blend!r}")
+    tracker = _optional_json(metadata, "tracker", None, fail)
+    needed = list(tracked_poses(t.name for t in obs_spec))
+    if tracker is not None and tracker != needed:
+        raise fail("tracker", f"says the policy reads {tracker} from the pose tracker, its obs_spec reads {needed}")
     task = _optional_json(metadata, "task", None, fail)
     if task is not None and not (isinstance(task, dict) and isinstance(task.get("env"), dict)):
         raise fail("task", "must be null or {'env': {...}} (the training task's environment config)")

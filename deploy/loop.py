@@ -113,7 +113,7 @@ class Runtime:
         self.memory = "not locked (not requested)"
         self.expected_mode_machine = expected_mode_machine
         self.num_body = contract.num_body
-        self.needs_tracker = contract.uses_reference or contract.uses_object
+        self.needs_tracker = contract.needs_tracker  # terms that read a tracked pose (contract.tracked_poses)
         self.shaper = TargetShaper(contract, self.dt, self.safety.max_target_rate)
         stall = self.safety.max_stall_periods
         self.timing = LoopTiming(self.dt, self.safety.max_overruns, self.safety.overrun_window_s,

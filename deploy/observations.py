@@ -149,6 +149,19 @@ def ref_object_rot(state: RobotState, ctx: ObsContext) -> np.ndarray:
     return rotation_6d(heading_inverse(state) @ ref).reshape(-1)
 
 
+def ref_root_local(state: RobotState, ctx: ObsContext) -> np.ndarray:
+    """For each k: [G^T (ref_root_pos[f_k] - ref_root_pos[f_0]), rot6(G^T R(ref_root_quat_wxyz[f_k]))], f_0 =
+    min(f(t), T - 1) the frame being tracked, G = Rz(yaw(ref_root_quat_wxyz[f_0])): where the reference's pelvis
+    goes, seen from the reference itself. Reads no tracked pose (a policy without mocap)."""
+    motion = ctx.motion
+    frame0 = ctx.contract.reference_frame(state.tick, motion.num_frames)
+    frames = ctx.ref_frames(state.tick)
+    g_inv = yaw_matrix(yaw_of_quat_wxyz(motion.root_quat_wxyz[frame0])).T
+    pos = (motion.root_pos[frames] - motion.root_pos[frame0]) @ g_inv.T
+    rot = rotation_6d(g_inv @ quat_wxyz_to_matrix(motion.root_quat_wxyz[frames]))
+    return np.concatenate([pos, rot], axis=1).reshape(-1)
+
+
 TERM_FUNCTIONS: dict[str, Callable[[RobotState, ObsContext], np.ndarray]] = {
     "projected_gravity": projected_gravity,
     "base_ang_vel": base_ang_vel,
@@ -164,6 +177,7 @@ TERM_FUNCTIONS: dict[str, Callable[[RobotState, ObsContext], np.ndarray]] = {
     "ref_link_pos": ref_link_pos,
     "ref_object_pos": ref_object_pos,
     "ref_object_rot": ref_object_rot,
+    "ref_root_local": ref_root_local,
 }
 assert set(TERM_FUNCTIONS) == set(OBS_TERMS), "observation registry and contract term table disagree"
 

@@ -118,7 +118,7 @@ class Session(contextlib.ExitStack):
         self.log_dir = log_dir = self._log_dir()
 
         body = self._body(contract)
-        tracker = self._tracker(motion)
+        tracker = self._tracker(motion, contract)
         if o.dry_run and hasattr(body, "imu_quat_source") and hasattr(tracker, "true_robot_quat_wxyz"):
             body.imu_quat_source = tracker.true_robot_quat_wxyz  # one simulated world: IMU agrees with mocap
         hands = self._hands(contract, real_hand_ports, hand_ids, rate)
@@ -260,8 +260,15 @@ class Session(contextlib.ExitStack):
         self.description["watchdog"] = watchdog.description
         return watchdog
 
-    def _tracker(self, motion):
+    def _tracker(self, motion, contract):
         o = self.options
+        if not contract.needs_tracker:  # its observation reads no tracked pose: no mocap to ask for
+            from deploy.tracking import NoTracker
+
+            self.description["tracker"] = "none (the policy reads no tracked pose)"
+            if o.tracker is not None:
+                log.warning("--tracker %s unused: %s reads no tracked pose", o.tracker, contract.source)
+            return NoTracker()
         kind = o.tracker or ("sim" if o.dry_run else "udp")
         self.description["tracker"] = kind
         if kind == "sim":

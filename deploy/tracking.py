@@ -66,6 +66,13 @@ class PoseTracker(ABC):
         return None
 
 
+class NoTracker(PoseTracker):
+    """For a policy that reads no tracked pose (contract.needs_tracker False): nothing is opened, nothing seen."""
+
+    def read(self) -> TrackedPoses:
+        return TrackedPoses(unseen_pose(), unseen_pose())
+
+
 class ReplayTracker(PoseTracker):
     """Plays the motion's root and object trajectories in real time from connect(); holds the last frame."""
 

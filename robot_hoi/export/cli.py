@@ -166,12 +166,12 @@ def run_untrained(args: argparse.Namespace) -> int:
     from robot_hoi.rl.models import ActorCritic
     from robot_hoi.tasks.interaction import factory
     from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg
-    from robot_hoi.tasks.interaction.mdp.observations import STUDENT_TERMS, student_observation_spec
+    from robot_hoi.tasks.interaction.mdp.observations import DEFAULT_STUDENT_TERMS, student_observation_spec
     from robot_hoi.utils.config import load_yaml_dataclass
 
     embodiment = load_embodiment(args.embodiment)
     env_cfg = load_yaml_dataclass(InteractionEnvCfg, TASK_CONFIG, ["num_envs=16", "psi.enabled=false"])
-    env_cfg.student_obs_terms = tuple(STUDENT_TERMS)
+    env_cfg.student_obs_terms = DEFAULT_STUDENT_TERMS
     sources = factory.expand_sources(args.data)[:1]
     clip = factory.load_source(sources[0], clip_options(args))
     env = factory.make_env([clip], env_cfg, embodiment)

@@ -96,14 +96,14 @@ def _onnx_policy(args):
     from robot_hoi.export.onnx_export import check_onnx_file
     from robot_hoi.rl.cli import TASK_CONFIG
     from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg
-    from robot_hoi.tasks.interaction.mdp.observations import STUDENT_TERMS
+    from robot_hoi.tasks.interaction.mdp.observations import DEFAULT_STUDENT_TERMS
     from robot_hoi.utils.config import load_yaml_dataclass
 
     meta = {k: json.loads(v) for k, v in check_onnx_file(args.policy).items() if k != "robot_hoi.version"}
     env_cfg = load_yaml_dataclass(InteractionEnvCfg, TASK_CONFIG)
     group = "policy" if meta.get("policy_kind") == "teacher" else "student"
     if group == "student":
-        env_cfg.student_obs_terms = tuple(s["name"] for s in meta.get("obs_spec", [])) or tuple(STUDENT_TERMS)
+        env_cfg.student_obs_terms = tuple(s["name"] for s in meta.get("obs_spec", [])) or DEFAULT_STUDENT_TERMS
         env_cfg.student_keyframes = tuple(meta.get("keyframes", env_cfg.student_keyframes))
     env_cfg.action_offset = "reference" if meta.get("action_offset_mode") == "reference" else "default"
     env_cfg.warmup_frames = int(meta.get("warmup_frames", env_cfg.warmup_frames))

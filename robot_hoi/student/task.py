@@ -13,7 +13,7 @@ from deploy.atomic import atomic_write_text
 from robot_hoi.errors import UserError
 from robot_hoi.tasks.interaction import factory
 from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg
-from robot_hoi.tasks.interaction.mdp.observations import STUDENT_TERMS
+from robot_hoi.tasks.interaction.mdp.observations import DEFAULT_STUDENT_TERMS
 from robot_hoi.utils.config import load_dataclass
 
 TASK_FILE = factory.TASK_FILE
@@ -29,9 +29,10 @@ def evaluation_cfg(env_cfg: InteractionEnvCfg, num_envs: int, seed: int = 0, pro
 
 
 def student_env_cfg(env_cfg: InteractionEnvCfg) -> InteractionEnvCfg:
-    """The teachers' env config with the deployable observation group switched on."""
+    """The teachers' env config with the deployable observation group switched on (its terms: the config's, e.g.
+    from --option object_free, else DEFAULT_STUDENT_TERMS)."""
     cfg = copy.deepcopy(env_cfg)
-    cfg.student_obs_terms = tuple(STUDENT_TERMS)
+    cfg.student_obs_terms = tuple(cfg.student_obs_terms) or DEFAULT_STUDENT_TERMS
     cfg.assist.enabled = False  # the teachers' curriculum; the student learns from teachers that no longer need it
     return cfg
 

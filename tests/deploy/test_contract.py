@@ -244,6 +244,25 @@ def test_which_inputs_a_policy_needs():
     ref_only = make_contract(emb, obs_terms=["joint_pos", "ref_object_pos"])
     assert ref_only.uses_reference and not ref_only.uses_object  # the reference object comes from the motion
     assert make_contract(emb, obs_terms=["object_rot"]).uses_object
+    # the pose tracker: the object terms read the object and the pelvis, the pelvis-relative reference the pelvis;
+    # proprioception, ref_joint_pos and ref_root_local (the reference seen from itself) read neither
+    tracker_free = make_contract(emb, obs_terms=["projected_gravity", "joint_pos", "ref_joint_pos", "ref_root_local"])
+    assert tracker_free.uses_reference and tracker_free.tracked_poses == () and not tracker_free.needs_tracker
+    assert ref_only.tracked_poses == ("robot",) and make_contract(emb, obs_terms=["ref_root_rot"]).needs_tracker
+    assert make_contract(emb, obs_terms=["joint_pos", "object_pos"]).tracked_poses == ("robot", "object")
+    assert json.loads(tracker_free.to_metadata()["tracker"]) == []
+
+
+def test_a_tracker_record_that_contradicts_the_observation_is_refused(contract, tmp_path):
+    assert json.loads(contract.to_metadata()["tracker"]) == ["robot", "object"]
+    meta = dict(contract.to_metadata(), tracker=json.dumps([]))  # claims no mocap while reading object_pos
+    path = write_policy(tmp_path / "bad.onnx", meta, contract.obs_dim, contract.num_actions)
+    with pytest.raises(ContractError, match=r"metadata 'tracker' says the policy reads \[\] from the pose tracker, "
+                                            r"its obs_spec reads \['robot', 'object'\]"):
+        PolicyContract.from_onnx(path)
+    del meta["tracker"]  # files written before the key: derived from obs_spec
+    assert PolicyContract.from_onnx(write_policy(tmp_path / "old.onnx", meta, contract.obs_dim,
+                                                 contract.num_actions)).needs_tracker
 
 
 @pytest.mark.parametrize("task", [[1], {"env": 3}, {"world": {}}])

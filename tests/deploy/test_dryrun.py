@@ -52,6 +52,26 @@ def test_dry_run_end_to_end(dev_policy, tmp_path, transport):
     assert summary["hands"]["left"]["cycles"] >= summary["ticks"] // 2
 
 
+def test_a_policy_without_tracked_poses_runs_with_no_tracker(tmp_path):
+    """An object-free, mocap-free policy (proprioception + reference joints + the reference's own pelvis path): the
+    dry run opens no tracker, starts without one and runs the policy fault-free."""
+    from deploy.devpolicy import build_dev_policy
+
+    from .conftest import EMBODIMENT_YAML
+
+    terms = ["projected_gravity", "base_ang_vel", "joint_pos", "joint_vel", "hand_force", "last_action",
+             "ref_joint_pos", "ref_root_local"]
+    policy = build_dev_policy(tmp_path / "free.onnx", embodiment=EMBODIMENT_YAML, obs_terms=terms)
+    contract = PolicyContract.from_onnx(policy)
+    assert not contract.needs_tracker
+    log_dir = tmp_path / "log"
+    assert deploy_main(["--dry-run", "--policy", str(policy), "--duration", "3.0", "--log-dir", str(log_dir),
+                        *FAST]) == 0
+    summary, ticks = check_run(log_dir, contract, min_policy_steps=40)
+    assert summary["setup"]["tracker"] == "none (the policy reads no tracked pose)"
+    assert np.isinf(ticks["tracker_age"]).all()  # no pose ever arrived, and none was needed
+
+
 def test_robot_hoi_cli_runs_the_dry_run(dev_policy, tmp_path, capsys):
     from robot_hoi.cli import main
 

@@ -53,6 +53,32 @@ def test_distil_export_check_and_dry_run(teacher_run, tmp_path, capsys):
     assert summary["phase_time_s"].get("POLICY", 0.0) > 0.0
 
 
+@pytest.mark.slow
+def test_an_object_free_student_exports_a_policy_that_needs_no_tracker(teacher_run, tmp_path, capsys):
+    """--option object_free: the actor reads proprioception and the reference only (the critic keeps the object);
+    its export says tracker [] and the dry run opens none."""
+    out = tmp_path / "student"
+    assert main(student_args(teacher_run, out, "--option", "object_free", "--set", "eval_episodes=0")) == 0
+    model, cfg, data = load_student(out / "student" / "model_2.pt")
+    names = [t["name"] for t in data["student"]["obs_spec"]]
+    assert "object_pos" not in names and "ref_link_pos" not in names and "ref_root_local" in names
+    assert data["dims"]["critic_obs"] > data["dims"]["actor_obs"]  # the critic still sees the object (privileged)
+    onnx_file = tmp_path / "free.onnx"
+    assert main(["export", "onnx", str(out / "student" / "model_2.pt"), "-o", str(onnx_file)]) == 0
+    contract = PolicyContract.from_onnx(onnx_file)
+    assert contract.tracked_poses == () and not contract.needs_tracker
+    import onnx
+
+    metadata = {p.key: p.value for p in onnx.load(str(onnx_file)).metadata_props}
+    assert json.loads(metadata["tracker"]) == []
+    log_dir = tmp_path / "deploy"
+    assert main(["deploy", "--dry-run", "--policy", str(onnx_file), "--duration", "4", "--auto-start",
+                 "--log-dir", str(log_dir)]) == 0
+    summary = json.loads((log_dir / "summary.json").read_text())
+    assert summary["setup"]["tracker"] == "none (the policy reads no tracked pose)"
+    assert summary["phase_time_s"].get("POLICY", 0.0) > 0.0
+
+
 def test_student_cli_errors_are_one_line(tmp_path, capsys):
     assert main(["train", "student", "--budget", "1it"]) == 2
     assert "--teachers" in capsys.readouterr().err

@@ -30,6 +30,10 @@ def test_student_observation_matches_deploy_builder():
     reference.link_pos = reference.link_pos + 0.01 * t[:, :, None] * torch.tensor([1.0, 0.5, 0.0])
     reference.robot_qpos = reference.robot_qpos.clone()
     reference.robot_qpos[:, 0] += 0.01 * t[:, 0]
+    # and turn (ref_root_local: the reference's pelvis path in its own heading frame)
+    from robot_hoi.utils.torch_rot import quat_from_yaw, quat_mul
+
+    reference.robot_qpos[:, 3:7] = quat_mul(quat_from_yaw(0.03 * t[:, 0]), reference.robot_qpos[:, 3:7])
     reference.object_pos = reference.object_pos + 0.02 * t * torch.tensor([1.0, 0.0, 0.1])
     cfg = InteractionEnvCfg(num_envs=4, nthread=2, seed=5, student_obs_terms=tuple(STUDENT_TERMS))
     cfg.init.stand_start_probability = 0.0

@@ -82,6 +82,7 @@ class InteractionEnv:
         self.scene = scene
         self.num_envs = cfg.num_envs
         dr.check(cfg.randomization)
+        obs_terms.check_student_terms(cfg.student_obs_terms)
         self.backend = scene.make_backend(cfg.num_envs, backend=cfg.backend, nthread=cfg.nthread,
                                           device=cfg.sim_device, variable_fields=dr.variable_fields(cfg.randomization))
         self.device = self.backend.device  # every env tensor lives where the physics state is

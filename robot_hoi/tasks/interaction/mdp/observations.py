@@ -261,13 +261,30 @@ def ref_object_rot(env) -> Tensor:
     return _keyframe_stack(env, lambda ref: _rot_in_heading(env, ref.object_rotmat))
 
 
+def ref_root_local(env) -> Tensor:
+    """The reference pelvis at t+k relative to the reference's own at t, in the reference's heading frame: no
+    tracked pose in it (an actor for a robot without mocap)."""
+    ref0, heading = env.ref, env.ref_heading_matrix  # heading: Rz(yaw of the reference root at t)
+    pos = lambda ref: ((ref.root_pos - ref0.root_pos)[:, None] @ heading)[:, 0]  # noqa: E731  (H^T v, row form)
+    return _keyframe_stack(env, lambda ref: torch.cat([pos(ref), _rot6(heading.transpose(-1, -2) @ ref.root_rotmat)],
+                                                      dim=-1))
+
+
 STUDENT_TERMS = {
     "projected_gravity": projected_gravity, "base_ang_vel": base_ang_vel, "joint_pos": joint_pos,
     "joint_vel": joint_vel, "hand_force": hand_force, "last_action": last_action_term, "object_pos": object_pos,
     "object_rot": object_rot, "ref_root_pos": ref_root_pos, "ref_root_rot": ref_root_rot,
     "ref_joint_pos": ref_joint_pos, "ref_link_pos": ref_link_pos, "ref_object_pos": ref_object_pos,
-    "ref_object_rot": ref_object_rot,
+    "ref_object_rot": ref_object_rot, "ref_root_local": ref_root_local,
 }
+# The student's observation unless its config names others (env.student_obs_terms; the object_free student option
+# drops every term that reads a tracked pose): proprioception, the tracked object and the reference around the
+# tracked pelvis.
+DEFAULT_STUDENT_TERMS = (
+    "projected_gravity", "base_ang_vel", "joint_pos", "joint_vel", "hand_force", "last_action", "object_pos",
+    "object_rot", "ref_root_pos", "ref_root_rot", "ref_joint_pos", "ref_link_pos", "ref_object_pos",
+    "ref_object_rot",
+)
 
 
 # The sensor noise (env_cfg.RandomizationCfg key) each deployable term carries in training: encoders, IMU, mocap
@@ -278,6 +295,14 @@ STUDENT_NOISE = {
     "ref_root_pos": "tracker_pos_noise", "ref_link_pos": "tracker_pos_noise", "ref_object_pos": "tracker_pos_noise",
     "ref_root_rot": "tracker_rot_noise", "ref_object_rot": "tracker_rot_noise",
 }
+
+
+def check_student_terms(names) -> None:
+    unknown = [n for n in names if n not in STUDENT_TERMS]
+    if unknown:
+        from robot_hoi.errors import UserError
+
+        raise UserError(f"env.student_obs_terms: unknown term(s) {', '.join(unknown)} (known: {', '.join(STUDENT_TERMS)})")
 
 
 def student_observation(env) -> Tensor:
