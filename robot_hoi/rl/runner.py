@@ -137,6 +137,13 @@ class OnPolicyRunner:
     def _on_iteration_start(self) -> None:
         """Called before each rollout (self.iteration = iterations done). Distillation sets its w schedule here."""
 
+    def _on_iteration_end(self) -> None:
+        """Called after each update (self.iteration counts it). Distillation averages its weights here."""
+
+    def evaluation_model(self):
+        """The policy the evaluator scores and model_best.pt stands for (distillation: its weight average)."""
+        return self.model
+
     # --- training ----------------------------------------------------------------------------------------------
     def _update_threads(self) -> int | None:
         """Threads for the PPO update on the CPU: the config's, else the physics pool's (idle meanwhile)."""
@@ -193,6 +200,7 @@ class OnPolicyRunner:
             t2 = time.monotonic()
             self.timers.lap("update")
             self.iteration += 1
+            self._on_iteration_end()
             iterations += 1
             samples += batch
             self.total_samples += batch
@@ -221,11 +229,13 @@ class OnPolicyRunner:
         """Score the current policy with the evaluator; log it, and save it as model_best.pt when it beats the best
         so far (eval_curve.eval_rank: success, interaction success, tracked duration). Returns the curve row."""
         started = time.monotonic()
-        self.model.eval()
+        model = self.evaluation_model()
+        was_training = model.training
+        model.eval()
         try:
-            metrics = self.evaluator(self.model)
+            metrics = self.evaluator(model)
         finally:
-            self.model.train()
+            model.train(was_training)
         row = {"step": self.iteration, "samples": self.total_samples, "train_time_s": round(self.total_time_s, 1),
                "eval_s": round(time.monotonic() - started, 2), **metrics}
         row["best"] = self.best_eval is None or eval_rank(metrics) > eval_rank(self.best_eval)

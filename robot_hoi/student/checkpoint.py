@@ -21,9 +21,11 @@ def is_student_checkpoint(path: str | Path) -> bool:
     return read_checkpoint(path).get("policy_kind") == POLICY_KIND
 
 
-def load_student(path: str | Path, device: str | torch.device = "cpu"
+def load_student(path: str | Path, device: str | torch.device = "cpu", averaged: bool = True
                  ) -> tuple[StudentActorCritic, StudentTrainConfig, dict]:
-    """Rebuild the trained student from its checkpoint alone, in eval mode: (model, config, checkpoint dict)."""
+    """Rebuild the trained student from its checkpoint alone, in eval mode: (model, config, checkpoint dict). A run
+    with a weight average (stability.ema_decay) gives the average, which it evaluated and selected on, unless
+    `averaged` is False (the last trained weights)."""
     data = read_checkpoint(path, map_location=device)
     if data.get("policy_kind") != POLICY_KIND:
         raise UserError(f"{path}: not a student checkpoint (policy_kind {data.get('policy_kind', 'teacher')!r})")
@@ -34,6 +36,6 @@ def load_student(path: str | Path, device: str | torch.device = "cpu"
     layout = TokenLayout.from_dict(info["token_layout"])
     dims = data["dims"]
     model = StudentActorCritic(layout, dims["critic_obs"], dims["num_actions"], cfg.student, cfg.model).to(device)
-    load_model_state(model, data["model"], path)
+    load_model_state(model, data["ema_model"] if averaged and "ema_model" in data else data["model"], path)
     model.eval()
     return model, cfg, data

@@ -175,6 +175,34 @@ class SkillMimicConfig:
 
 
 @dataclass
+class StabilityConfig:
+    """Neighbouring checkpoints that agree (off by default; --option stable). The student that is evaluated,
+    selected (model_best.pt) and exported is an exponential moving average of the trained weights, and the actor's
+    learning rate decays, so late updates move it less. Measured without them on lift_place: checkpoints 25
+    iterations apart scored 1.00 / 0.40 / 0.20 in sim2sim."""
+
+    ema_decay: float = 0.0  # weight of the old average per iteration (0: off; the average is the last weights)
+    lr_half_life: int = 0  # iterations over which ppo.actor_lr halves (0: constant)
+    lr_floor: float = 0.1  # the decayed rate stops at this fraction of ppo.actor_lr
+
+    def __post_init__(self) -> None:
+        if not 0.0 <= self.ema_decay < 1.0:
+            raise ValueError("stability.ema_decay must lie in [0, 1)")
+        if self.lr_half_life < 0 or not 0.0 < self.lr_floor <= 1.0:
+            raise ValueError("stability.lr_half_life must be >= 0 and lr_floor in (0, 1]")
+
+    def ema_weight(self, updates: int) -> float:
+        """Decay of the average's update number `updates` (1, 2, ...): ramped in as (1 + n) / (10 + n), so the
+        first average is not dominated by the untrained start."""
+        return min(self.ema_decay, (1.0 + updates) / (10.0 + updates))
+
+    def lr_scale(self, iteration: int) -> float:
+        if self.lr_half_life <= 0:
+            return 1.0
+        return max(self.lr_floor, 0.5 ** (iteration / self.lr_half_life))
+
+
+@dataclass
 class StudentTrainConfig(TrainConfig):
     """TrainConfig (model = critic settings, ppo, runner) + the student sections. model.actor_hidden_dims is
     unused: the actor is the Transformer of `student`."""
@@ -186,6 +214,7 @@ class StudentTrainConfig(TrainConfig):
     distill: DistillConfig = field(default_factory=DistillConfig)
     complexmimic: ComplexMimicConfig = field(default_factory=ComplexMimicConfig)
     skillmimic: SkillMimicConfig = field(default_factory=SkillMimicConfig)
+    stability: StabilityConfig = field(default_factory=StabilityConfig)
 
 
 def option_path(name: str) -> Path:

@@ -306,6 +306,12 @@ def train(args: argparse.Namespace, rank: Rank | None = None) -> dict:
             runner.resume(latest)
             if rank.is_main:
                 print(f"[student] resumed from {latest} (iteration {runner.iteration})")
+    if rank.is_main and setup.cfg.runner.eval_interval:
+        runner.evaluator = validation_evaluator(setup, runner, keep)
+        runner.on_evaluation = lambda row: print(
+            f"[student] validation at it {row['step']}: success {row['success_rate']:.2f}, interaction "
+            f"{row['interaction_success_rate']:.2f}, E_h {row['E_h_cm']:.1f} cm"
+            f"{' (best so far: model_best.pt)' if row['best'] else ''}")
     if rank.is_main:
         ranks = f" x {rank.world_size} ranks" if rank.distributed else ""
         print(f"[student] obs {student_env.obs_dims}, {student_env.num_envs} envs{ranks}, "
@@ -322,6 +328,12 @@ def train(args: argparse.Namespace, rank: Rank | None = None) -> dict:
     if not rank.is_main:
         return report
     print(f"[student] {({k: round(v, 3) for k, v in stats.items()})}")
+    selection = selection_record(folder, setup.cfg)
+    if selection is not None:
+        atomic_write_text(folder / SELECTION_FILE, json.dumps(selection, indent=2) + "\n")
+        print(f"[student] selected {selection['checkpoint']} (iteration {selection['iteration']}, validation "
+              f"success {selection['best']['success_rate']:.2f}; its neighbours within "
+              f"{selection['neighbour_success_spread']:.2f}): {folder / SELECTION_FILE}")
     if setup.cfg.eval_episodes > 0:
         evaluation = evaluate_run(setup, runner, keep)
         atomic_write_text(folder / "eval.json", json.dumps(evaluation, indent=2) + "\n")
@@ -337,7 +349,7 @@ def evaluate_run(setup: Setup, runner, keep: list[int]) -> dict:
 
     episodes = setup.cfg.eval_episodes
     rows: dict[str, dict[str, dict[str, float]]] = {}
-    model = runner.model.eval()
+    model = runner.evaluation_model().eval()
     env_refs = runner.env.env.references
     for k, i in enumerate(keep):
         clip = setup.clips[i]
@@ -351,3 +363,72 @@ def evaluate_run(setup: Setup, runner, keep: list[int]) -> dict:
     for line in format_table(rows):
         print(line)
     return rows
+
+
+SELECTION_FILE = "selection.json"
+
+
+def validation_evaluator(setup: Setup, runner, keep: list[int]):
+    """model -> mean metrics over the kept clips, each on the reference it trained on (the one its export deploys
+    with), under the randomized protocol on validation seeds (VALIDATION_SEED + seed, disjoint from `robot-hoi
+    eval`'s) as the teachers' model selection: envs built once and re-seeded, so every checkpoint meets the same
+    starts. The runner keeps the best as model_best.pt."""
+    from robot_hoi.rl.evaluation import DEFAULT_PROTOCOL, VALIDATION_SEED, load_protocol, summarise
+    from robot_hoi.student.evaluation import evaluate_groups
+    from robot_hoi.student.student_env import StudentEnv, fresh_providers
+    from robot_hoi.tasks.interaction.env import InteractionEnv
+
+    seed = VALIDATION_SEED + setup.cfg.seed
+    episodes = setup.cfg.runner.eval_episodes
+    protocol = load_protocol(DEFAULT_PROTOCOL)[1]
+    envs = {}
+    for k, i in enumerate(keep):
+        env = InteractionEnv(evaluation_cfg(setup.env_cfg, episodes, seed, protocol), setup.scene,
+                             [runner.env.env.references[k]])
+        envs[setup.clips[i].name] = StudentEnv(env, fresh_providers(runner.env.providers, episodes))
+    groups = runner.cfg.runner.actor_obs_groups
+
+    def evaluator(model) -> dict[str, float]:
+        results = {}
+        for name, env in envs.items():
+            env.env.generator.manual_seed(seed)
+            results[name] = evaluate_groups(env, model, groups)
+        return summarise(results)
+
+    return evaluator
+
+
+def selection_record(folder: Path, cfg: StudentTrainConfig) -> dict | None:
+    """Which checkpoint the run stands for (model_best.pt) and the evidence: its validation row, the evaluations
+    before and after it and how far their success spreads, the protocol and the stability settings. None without
+    in-training evaluations."""
+    from robot_hoi.rl.eval_curve import EVAL_CURVE_FILE, read_curve
+    from robot_hoi.rl.evaluation import DEFAULT_PROTOCOL, VALIDATION_SEED
+
+    path = folder / EVAL_CURVE_FILE
+    if not path.is_file():
+        return None
+    rows = list({row["step"]: row for row in read_curve(path)}.values())  # a resumed run re-evaluates: keep the last
+    rows.sort(key=lambda row: row["step"])
+    best = [i for i, row in enumerate(rows) if row.get("best")]
+    if not best:
+        return None
+    i = best[-1]
+    around = rows[max(i - 1, 0): i + 2]
+    successes = [row["success_rate"] for row in around]
+    return {
+        "checkpoint": "model_best.pt",
+        "iteration": rows[i]["step"],
+        "rule": "the best validation evaluation (eval_curve.eval_rank: success, interaction success, tracked "
+                "duration)",
+        "validation": {"protocol": DEFAULT_PROTOCOL, "seed": VALIDATION_SEED + cfg.seed,
+                       "episodes_per_clip": cfg.runner.eval_episodes, "every_iterations": cfg.runner.eval_interval},
+        "weights": (f"exponential moving average, decay {cfg.stability.ema_decay}" if cfg.stability.ema_decay > 0
+                    else "the trained weights (no average)"),
+        "actor_lr": ({"half_life_iterations": cfg.stability.lr_half_life, "floor": cfg.stability.lr_floor}
+                     if cfg.stability.lr_half_life > 0 else "constant"),
+        "best": rows[i],
+        "neighbours": [row for row in around if row is not rows[i]],
+        "neighbour_success_spread": max(successes) - min(successes),
+        "evaluations": len(rows),
+    }

@@ -12,6 +12,7 @@ total_samples then counts every rank's samples, rank_samples this process's.
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any, Protocol
@@ -74,6 +75,13 @@ class DistillationRunner(OnPolicyRunner):
         self.rank = Rank()
         self.rank_samples = 0  # samples this process collected (all ranks: total_samples)
         self.saved_checkpoints: list[Path] = []
+        # the weight average (cfg.stability.ema_decay): made at the first update, after data_parallel has swapped
+        # the normalisers; what is evaluated, selected and exported
+        self.ema: StudentActorCritic | None = None
+        self.ema_updates = 0
+        if cfg.stability.lr_half_life > 0 and cfg.ppo.desired_kl is not None:
+            raise UserError("stability.lr_half_life with ppo.desired_kl: the KL-adaptive rate would undo the decay; "
+                            "use one (--set ppo.desired_kl=null)")
         self._reset_stats()
 
     def _reset_stats(self) -> None:
@@ -114,9 +122,31 @@ class DistillationRunner(OnPolicyRunner):
         self._student_probability = student_probability(t, self.cfg.distill.beta)
         self._weights = loss_weights(t, self.cfg.distill)
         self.alg.surrogate_coef = self._weights[0]
+        if self.cfg.stability.lr_half_life > 0:
+            lr = self.cfg.ppo.actor_lr * self.cfg.stability.lr_scale(t)
+            for group in self.alg.actor_optimizer.param_groups:
+                group["lr"] = lr
         self._hook_scalars = {}
         for hook in self.iteration_hooks:
             self._hook_scalars.update(hook(t) or {})
+
+    def _on_iteration_end(self) -> None:
+        """Fold the updated weights into the average (parameters averaged, normaliser statistics taken as they are)."""
+        if self.cfg.stability.ema_decay <= 0:
+            return
+        self.ema_updates += 1
+        if self.ema is None:
+            self.ema = copy.deepcopy(self.model).eval().requires_grad_(False)
+            return
+        decay = self.cfg.stability.ema_weight(self.ema_updates)
+        with torch.no_grad():
+            for average, current in zip(self.ema.parameters(), self.model.parameters(), strict=True):
+                average.lerp_(current, 1.0 - decay)
+            for average, current in zip(self.ema.buffers(), self.model.buffers(), strict=True):
+                average.copy_(current)
+
+    def evaluation_model(self) -> StudentActorCritic:
+        return self.ema if self.ema is not None else self.model
 
     def _select_actions(self, actor_obs: Tensor, critic_obs: Tensor, extra_obs: dict[str, Tensor]) -> Tensor:
         """Alg. 1 lines 4-12: store the student's own sample a^(S) and the teacher's a^(T) with every transition;
@@ -175,6 +205,7 @@ class DistillationRunner(OnPolicyRunner):
             "policy_kind": POLICY_KIND,
             "student": {**self.student_info, "token_layout": self.model.layout.to_dict()},
             "sampler_state": {name: obj.state_dict() for name, obj in self.stateful.items()},
+            **({"ema_model": self.ema.state_dict(), "ema_updates": self.ema_updates} if self.ema is not None else {}),
         })
 
     def load(self, path: str | Path, load_optimizer: bool = False) -> dict[str, Any]:
@@ -186,6 +217,12 @@ class DistillationRunner(OnPolicyRunner):
 
     def resume(self, path: str | Path) -> None:
         super().resume(path)
+        if "ema_model" in self._loaded and self.cfg.stability.ema_decay > 0:
+            from robot_hoi.rl.checkpoint import load_model_state
+
+            self.ema = copy.deepcopy(self.model).eval().requires_grad_(False)
+            load_model_state(self.ema, self._loaded["ema_model"], path)
+            self.ema_updates = int(self._loaded.get("ema_updates", self.iteration))
         states = self._loaded.get("sampler_state", {})
         for name, obj in self.stateful.items():
             if name in states:

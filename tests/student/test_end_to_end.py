@@ -79,6 +79,28 @@ def test_an_object_free_student_exports_a_policy_that_needs_no_tracker(teacher_r
     assert summary["phase_time_s"].get("POLICY", 0.0) > 0.0
 
 
+@pytest.mark.slow
+def test_stable_student_selects_on_validation_and_records_why(teacher_run, tmp_path, capsys):
+    """--option stable: validation on the randomized protocol keeps model_best.pt (the weight average), and
+    selection.json holds the choice, its validation row and its neighbours'."""
+    out = tmp_path / "student"
+    assert main(student_args(teacher_run, out, "--option", "stable", "--set", "runner.eval_interval=2",
+                             "--set", "runner.eval_episodes=2", "--set", "eval_episodes=0", budget="6it")) == 0
+    assert "[student] validation at it 2" in capsys.readouterr().out
+    folder = out / "student"
+    selection = json.loads((folder / "selection.json").read_text())
+    curve = [json.loads(line) for line in (folder / "eval_curve.jsonl").read_text().splitlines()]
+    assert [row["step"] for row in curve] == [2, 4, 6] and selection["evaluations"] == 3
+    assert selection["checkpoint"] == "model_best.pt" and selection["iteration"] in (2, 4, 6)
+    assert selection["validation"] == {"protocol": "randomized", "seed": 100_001, "episodes_per_clip": 2,
+                                       "every_iterations": 2}
+    assert selection["weights"].startswith("exponential moving average, decay 0.98")
+    assert selection["actor_lr"] == {"half_life_iterations": 100, "floor": 0.1}
+    assert 1 <= len(selection["neighbours"]) <= 2 and 0.0 <= selection["neighbour_success_spread"] <= 1.0
+    best = load_student(folder / "model_best.pt")[2]
+    assert best["iteration"] == selection["iteration"] and "ema_model" in best
+
+
 def test_student_cli_errors_are_one_line(tmp_path, capsys):
     assert main(["train", "student", "--budget", "1it"]) == 2
     assert "--teachers" in capsys.readouterr().err

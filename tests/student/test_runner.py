@@ -147,3 +147,51 @@ def test_student_checkpoints_hold_the_runners_contents_and_take_extras(scene, tm
     teacher_keys = torch.load(OnPolicyRunner.save(runner, tmp_path / "t.pt"), weights_only=True).keys()
     assert set(data) == set(teacher_keys) | {"policy_kind", "student", "sampler_state", "eval"}
     assert data["eval"] == {"success": 1.0} and data["student"]["sources"] == ["test"]
+
+
+def test_weight_average_and_decaying_learning_rate(scene, tmp_path):
+    """stability: the average folds in each update's weights at the ramped decay; the actor's rate halves every
+    lr_half_life iterations down to its floor; evaluation, model_best.pt and load_student use the average."""
+    runner, memory, _ = build(scene, ["stability.ema_decay=0.5", "stability.lr_half_life=2",
+                                      "stability.lr_floor=0.4", "ppo.actor_lr=1e-3"], log_dir=tmp_path / "a")
+    weights = []
+    end = runner._on_iteration_end
+
+    def recording_end():
+        weights.append([p.detach().clone() for p in runner.model.parameters()])
+        end()
+
+    runner._on_iteration_end = recording_end
+    runner.learn(Budget(iterations=4))
+    expected = weights[0]
+    for n, current in enumerate(weights[1:], start=2):
+        decay = runner.cfg.stability.ema_weight(n)
+        expected = [decay * e + (1 - decay) * c for e, c in zip(expected, current, strict=True)]
+    for got, want in zip(runner.ema.parameters(), expected, strict=True):
+        torch.testing.assert_close(got, want)
+    assert any(not torch.equal(a, b) for a, b in zip(runner.ema.parameters(), runner.model.parameters(), strict=True))
+    for a, b in zip(runner.ema.buffers(), runner.model.buffers(), strict=True):  # normaliser statistics: as trained
+        assert torch.equal(a, b)
+    assert [v for _, v in memory.scalars["LR/actor"]] == pytest.approx([1e-3, 1e-3 * 0.5 ** 0.5, 5e-4, 4e-4])  # floor at t = 3
+    # evaluation scores the average, and the checkpoints carry it
+    seen = []
+    runner.evaluator = lambda model: seen.append(model) or {"success_rate": 1.0, "duration_s": 1.0}
+    runner.evaluate_and_keep_best()
+    assert seen == [runner.ema] and not runner.ema.training
+    obs = torch.randn(2, runner.model.num_actor_obs)
+    averaged, _, _ = load_student(tmp_path / "a" / "model_best.pt")
+    last, _, _ = load_student(tmp_path / "a" / "model_4.pt", averaged=False)
+    torch.testing.assert_close(averaged.act_inference(obs), runner.ema.act_inference(obs))  # a fused path may round
+    assert torch.equal(last.act_inference(obs), runner.model.eval().act_inference(obs))
+    # resume continues the average where it was
+    resumed, _, _ = build(scene, ["stability.ema_decay=0.5", "stability.lr_half_life=2", "stability.lr_floor=0.4",
+                                  "ppo.actor_lr=1e-3"], log_dir=tmp_path / "b")
+    resumed.resume(tmp_path / "a" / "model_4.pt")
+    assert resumed.ema_updates == 4
+    for a, b in zip(resumed.ema.parameters(), runner.ema.parameters(), strict=True):
+        assert torch.equal(a, b)
+
+
+def test_a_decaying_rate_refuses_the_adaptive_one(scene):
+    with pytest.raises(UserError, match="lr_half_life with ppo.desired_kl"):
+        build(scene, ["stability.lr_half_life=10", "ppo.desired_kl=0.01"])
