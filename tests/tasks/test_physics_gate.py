@@ -97,3 +97,20 @@ def test_the_folder_table_has_one_row_per_clip_and_counts_passes():
     assert table[1].split()[:4] == ["a", "100", "1", "PASS"]
     assert "contact_lost @ 40 (left 20-60)" in table[2] and "ERROR" in table[3]
     assert table[-1] == "1 of 3 clips pass the physics gate"
+
+
+def test_the_gate_judges_the_object_and_contacts_not_a_tightened_body_line():
+    """A task that tightens its body line (a test's 1 mm link error) still gates on the object line and the held
+    contacts alone."""
+    from robot_hoi.paths import TASK_CONFIG
+    from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg
+    from robot_hoi.tasks.interaction.feasibility import gate_config
+    from robot_hoi.utils.config import load_yaml_dataclass
+
+    cfg = load_yaml_dataclass(InteractionEnvCfg, TASK_CONFIG, ["terminations.max_mean_link_error=0.001"])
+    gate = gate_config(cfg).terminations
+    assert gate.max_mean_link_error == float("inf") and gate.max_interaction_distance_error == float("inf")
+    assert gate.min_root_height == float("-inf")
+    assert gate.max_mean_object_point_error == cfg.terminations.max_mean_object_point_error
+    assert gate.max_contact_loss_frames == cfg.terminations.max_contact_loss_frames
+    assert cfg.terminations.max_mean_link_error == 0.001  # the task's own config is untouched

@@ -18,6 +18,8 @@ reference unless told to train anyway.
 from __future__ import annotations
 
 import copy
+import dataclasses
+import math
 
 import torch
 
@@ -26,10 +28,14 @@ SIDES = ("left", "right")
 
 def gate_config(env_cfg):
     """A copy of a task config set up for the gate: one env, reference start without noise, pelvis held, object
-    free, the evaluated object line, no PSI and no domain randomisation."""
+    free, the evaluated object line, no PSI and no domain randomisation. The gate judges the object and the held
+    contacts only: the body conditions (link error, root height, interaction distance) are off, so a task's
+    tightened body line does not fail a reference whose object is held."""
     from robot_hoi.tasks.interaction.env_cfg import RandomizationCfg
 
     cfg = copy.deepcopy(env_cfg)
+    cfg.terminations = dataclasses.replace(cfg.terminations, max_mean_link_error=math.inf, min_root_height=-math.inf,
+                                           max_interaction_distance_error=math.inf)
     cfg.num_envs = 1
     cfg.seed = 0
     cfg.backend = "cpu"
