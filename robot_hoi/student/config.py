@@ -25,6 +25,7 @@ STUDENT_CONFIG = CONFIGS_DIR / "train" / "student.yaml"
 STUDENT_FAST_CONFIG = CONFIGS_DIR / "train" / "student_fast.yaml"
 OPTIONS_DIR = CONFIGS_DIR / "train" / "student_options"
 PRESETS = {"paper": STUDENT_CONFIG, "fast": STUDENT_FAST_CONFIG}
+DEFAULT_PRESET = "fast"  # what `robot-hoi train student` uses without --preset
 
 
 @dataclass

@@ -33,7 +33,7 @@ from robot_hoi.data.cli_options import clip_options
 from robot_hoi.errors import UserError
 from robot_hoi.rl.budget import Budget, parse_budget
 from robot_hoi.sim.device import physics_device, resolve_env_cfg
-from robot_hoi.student.config import PRESETS, StudentTrainConfig, load_student_config
+from robot_hoi.student.config import DEFAULT_PRESET, PRESETS, StudentTrainConfig, load_student_config
 from robot_hoi.student.distributed import Rank, SharedBudget, state_checksum, sum_over_ranks
 from robot_hoi.student.reference_view import ReferenceTimeline, ReferenceView
 from robot_hoi.student.task import (
@@ -87,7 +87,7 @@ def prepare(args: argparse.Namespace) -> Setup:
         raise UserError("robot-hoi train student needs --teachers RUN_DIR (the output folder of `robot-hoi train`)")
     if getattr(args, "data", None):
         raise UserError("robot-hoi train student: --data does not apply; the student learns its teachers' clips")
-    config_path = args.config or PRESETS[args.preset]
+    config_path = args.config or PRESETS[args.preset or DEFAULT_PRESET]  # None: no --preset (nor recipe)
     cfg, env_overrides = load_student_config(config_path, getattr(args, "options", []), args.overrides)
     runs = load_teacher_runs(args.teachers)
     teacher_env_cfg = load_dataclass(InteractionEnvCfg, runs[0].env, f"{runs[0].checkpoint.parent}/task.json")
