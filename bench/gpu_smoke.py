@@ -83,8 +83,7 @@ def env_and_training(device: str, worlds: int, steps: int, train_seconds: float)
     """Full env steps/s with zero-mean noisy actions, its physics report, then a PPO run of `train_seconds`."""
     from robot_hoi.embodiment import load_embodiment
     from robot_hoi.rl.budget import Budget
-    from robot_hoi.rl.cli import PRESETS
-    from robot_hoi.rl.config import load_train_config
+    from robot_hoi.rl.config import PRESETS, load_train_config
     from robot_hoi.rl.runner import OnPolicyRunner
     from robot_hoi.tasks.interaction import factory
     from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg

@@ -90,7 +90,7 @@ def pelvis_track(scene, push: bool) -> np.ndarray:
 
 def lift_hold(substeps: int, clip) -> dict:
     from robot_hoi.embodiment import load_embodiment
-    from robot_hoi.rl.cli import TASK_CONFIG
+    from robot_hoi.paths import TASK_CONFIG
     from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg
     from robot_hoi.tasks.interaction.feasibility import physics_gate
     from robot_hoi.utils.config import load_yaml_dataclass

@@ -47,8 +47,8 @@ SPLIT = (
 
 def build_training(args, run_dir: Path):
     from robot_hoi.embodiment import load_embodiment
-    from robot_hoi.rl.cli import PRESETS, TASK_CONFIG
-    from robot_hoi.rl.config import load_train_config
+    from robot_hoi.paths import TASK_CONFIG
+    from robot_hoi.rl.config import PRESETS, load_train_config
     from robot_hoi.rl.runner import OnPolicyRunner
     from robot_hoi.sim.device import policy_device, resolve_env_cfg
     from robot_hoi.tasks.interaction import factory

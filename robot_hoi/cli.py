@@ -12,16 +12,16 @@ import sys
 
 # subcommand -> module with register(subparsers). Order is the pipeline order shown in --help.
 COMMAND_MODULES = {
-    "data": "robot_hoi.data.cli",
-    "model": "robot_hoi.embodiment.cli",
-    "retarget": "robot_hoi.retarget.cli",
-    "train": "robot_hoi.rl.cli",
-    "eval": "robot_hoi.rl.eval_cli",
-    "compare": "robot_hoi.rl.compare_cli",
-    "results": "robot_hoi.rl.results_cli",
-    "curve": "robot_hoi.rl.curve_cli",
-    "play": "robot_hoi.rl.play",
-    "export": "robot_hoi.export.cli",
+    "data": "robot_hoi.commands.data",
+    "model": "robot_hoi.commands.model",
+    "retarget": "robot_hoi.commands.retarget",
+    "train": "robot_hoi.commands.train",
+    "eval": "robot_hoi.commands.eval",
+    "compare": "robot_hoi.commands.compare",
+    "results": "robot_hoi.commands.results",
+    "curve": "robot_hoi.commands.curve",
+    "play": "robot_hoi.commands.play",
+    "export": "robot_hoi.commands.export",
     "deploy": "deploy.cli",
     "sim2sim": "sim2sim.cli",
 }

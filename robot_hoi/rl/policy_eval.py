@@ -1,5 +1,6 @@
-"""Evaluate a checkpoint (teacher, student or an untrained baseline) under an evaluation protocol and build the
-record `robot-hoi eval` prints and writes, `robot-hoi compare` pools and `robot-hoi results` tabulates."""
+"""Evaluate a teacher checkpoint (or an untrained baseline) under an evaluation protocol and build the record
+`robot-hoi eval` prints and writes, `robot-hoi compare` pools and `robot-hoi results` tabulates (a student's record
+is built the same way by robot_hoi.student.eval_checkpoint)."""
 
 from __future__ import annotations
 
@@ -43,27 +44,17 @@ def resolve_protocol(request: EvalRequest) -> tuple[str, EvalProtocol]:
     return name, protocol
 
 
-def evaluate_checkpoint(request: EvalRequest) -> dict[str, Any]:
-    """The evaluation record of one checkpoint: per clip and pooled, both success definitions."""
+def evaluate_teacher(request: EvalRequest) -> dict[str, Any]:
+    """The evaluation record of a teacher checkpoint (or of "untrained"): per clip and pooled, both success
+    definitions. Students are evaluated by robot_hoi.student.eval_checkpoint into the same record."""
     name, protocol = resolve_protocol(request)
+    ckpt = None
     if request.checkpoint != "untrained":
         from robot_hoi.rl.checkpoint import resolve_checkpoint
-        from robot_hoi.student.checkpoint import is_student_checkpoint
 
         ckpt = resolve_checkpoint(request.checkpoint)
-        if is_student_checkpoint(ckpt):
-            from robot_hoi.student.eval_checkpoint import evaluate_student
-
-            clips = evaluate_student(ckpt, request.data, request.episodes, request.seed, request.overrides, protocol)
-            record = _record(request, name, protocol, "student", ckpt, clips["mocap"])
-            if "distilled" in clips:
-                record["distilled"] = {"clips": clips["distilled"],
-                                       "overall": evaluation.overall_record(clips["distilled"])}
-            return record
-    else:
-        ckpt = None
-    return _record(request, name, protocol, "teacher" if ckpt else "untrained", ckpt,
-                   _evaluate_teacher(request, protocol, ckpt))
+    return make_record(request, name, protocol, "teacher" if ckpt else "untrained", ckpt,
+                       _evaluate_teacher(request, protocol, ckpt))
 
 
 def _evaluate_teacher(request: EvalRequest, protocol: EvalProtocol, ckpt: Path | None) -> dict[str, Any]:
@@ -109,7 +100,7 @@ def _evaluate_teacher(request: EvalRequest, protocol: EvalProtocol, ckpt: Path |
     return clips
 
 
-def _record(request: EvalRequest, name: str, protocol: EvalProtocol, kind: str, ckpt: Path | None,
+def make_record(request: EvalRequest, name: str, protocol: EvalProtocol, kind: str, ckpt: Path | None,
             clips: dict[str, Any]) -> dict[str, Any]:
     record: dict[str, Any] = {
         "schema": RECORD_SCHEMA,

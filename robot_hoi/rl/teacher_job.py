@@ -9,7 +9,7 @@ Group folder (beside the runner's checkpoints and logs):
                    started from. A retry of the same invocation (same token: a Ray task re-run after a crash or
                    pre-emption) resumes from the latest checkpoint and trains only the budget left; a new
                    invocation starts afresh, or with `--resume` continues with a fresh budget.
-  eval.json        InterMimic's metrics of the final policy (robot_hoi.rl.eval_cli.evaluate), per clip and mean;
+  eval.json        InterMimic's metrics of the final policy (robot_hoi.rl.evaluation.evaluate), per clip and mean;
                    under "best", the same for model_best.pt (the in-training evaluation's pick, runner.eval_interval).
 """
 

@@ -100,3 +100,19 @@ def evaluate_student(checkpoint: str | Path, data: list[str] | None = None, epis
         results.setdefault(kind, {})[clip.name] = clip_record(
             evaluate_definitions(GroupsAsPolicy(wrapped, groups), model, seed))
     return results
+
+
+def student_record(request) -> dict:
+    """The evaluation record (robot_hoi.rl.policy_eval) of the student checkpoint `request.checkpoint`: its MoCap
+    reference per clip, and its distilled reference beside it where it trained on one."""
+    from robot_hoi.rl.checkpoint import resolve_checkpoint
+    from robot_hoi.rl.evaluation import overall_record
+    from robot_hoi.rl.policy_eval import make_record, resolve_protocol
+
+    name, protocol = resolve_protocol(request)
+    ckpt = resolve_checkpoint(request.checkpoint)
+    clips = evaluate_student(ckpt, request.data, request.episodes, request.seed, request.overrides, protocol)
+    record = make_record(request, name, protocol, "student", ckpt, clips["mocap"])
+    if "distilled" in clips:
+        record["distilled"] = {"clips": clips["distilled"], "overall": overall_record(clips["distilled"])}
+    return record

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from robot_hoi.cli import main
-from robot_hoi.data import cli as data_cli
+from robot_hoi.commands import data as data_cli
 from robot_hoi.data import synth
 from robot_hoi.data.clip import load_clip
 

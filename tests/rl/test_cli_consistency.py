@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from robot_hoi.cli import build_parser, main
+from robot_hoi.commands.train import _stage_from_data
 from robot_hoi.rl.checkpoint import resolve_checkpoint
-from robot_hoi.rl.cli import _stage_from_data
 
 
 def _help(*command: str) -> str:

@@ -162,9 +162,9 @@ def test_results_are_generated_from_records_and_checked(record, tmp_path, capsys
 
 
 def test_committed_results_are_what_their_records_give():
+    from robot_hoi.commands.results import RESULTS_DIR
     from robot_hoi.paths import REPO_ROOT
     from robot_hoi.rl.results import fill_blocks
-    from robot_hoi.rl.results_cli import RESULTS_DIR
 
     if not (RESULTS_DIR / "data").is_dir():
         pytest.skip("no docs/results/data in this checkout")

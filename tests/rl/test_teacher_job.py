@@ -104,8 +104,8 @@ def test_a_shipped_base_that_does_not_fit_trains_from_scratch_but_an_asked_for_o
 
 def test_teachers_start_from_the_shipped_base_policy_unless_told(tmp_path, monkeypatch):
     from robot_hoi import paths
+    from robot_hoi.commands.train import base_policy_init
     from robot_hoi.errors import UserError
-    from robot_hoi.rl.cli import base_policy_init
 
     monkeypatch.setattr(paths, "POLICIES_DIR", tmp_path)
     assert base_policy_init(None, "g1_inspire") is None  # nothing shipped: from scratch

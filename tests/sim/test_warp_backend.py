@@ -11,9 +11,9 @@ import torch
 
 pytest.importorskip("mujoco_warp")
 
+from robot_hoi.commands.train import TASK_CONFIG  # noqa: E402
 from robot_hoi.data.synth import default_clip  # noqa: E402
 from robot_hoi.embodiment import load_embodiment  # noqa: E402
-from robot_hoi.rl.cli import TASK_CONFIG  # noqa: E402
 from robot_hoi.sim import make_backend  # noqa: E402
 from robot_hoi.tasks.interaction import factory  # noqa: E402
 from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg  # noqa: E402

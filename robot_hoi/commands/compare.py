@@ -13,7 +13,7 @@ import argparse
 import json
 from pathlib import Path
 
-from robot_hoi.rl.eval_cli import add_protocol_options
+from robot_hoi.commands.eval import add_protocol_options
 
 
 def register(subparsers) -> None:
@@ -39,9 +39,8 @@ def expand_runs(paths: list[str]) -> list[str]:
 
 
 def run(args: argparse.Namespace) -> int:
+    from robot_hoi.commands.eval import evaluate_checkpoint, protocol_line, request_from_args
     from robot_hoi.rl.compare import compare_records
-    from robot_hoi.rl.eval_cli import protocol_line, request_from_args
-    from robot_hoi.rl.policy_eval import evaluate_checkpoint
 
     sides = {}
     for name, paths in zip(args.names, (args.runs, args.vs), strict=True):

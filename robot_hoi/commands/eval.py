@@ -66,9 +66,19 @@ def request_from_args(args: argparse.Namespace, checkpoint: str):
                        preset=getattr(args, "preset", "fast"))
 
 
-def run(args: argparse.Namespace) -> int:
-    from robot_hoi.rl.policy_eval import evaluate_checkpoint
+def evaluate_checkpoint(request) -> dict:
+    """The evaluation record of a teacher, a student or `untrained` (robot_hoi.rl.policy_eval.EvalRequest)."""
+    from robot_hoi.rl.checkpoint import resolve_checkpoint
+    from robot_hoi.rl.policy_eval import evaluate_teacher
+    from robot_hoi.student.checkpoint import is_student_checkpoint
+    from robot_hoi.student.eval_checkpoint import student_record
 
+    if request.checkpoint != "untrained" and is_student_checkpoint(resolve_checkpoint(request.checkpoint)):
+        return student_record(request)
+    return evaluate_teacher(request)
+
+
+def run(args: argparse.Namespace) -> int:
     record = evaluate_checkpoint(request_from_args(args, args.checkpoint))
     record["label"] = args.label or record["checkpoint"]
     record["table"] = args.table

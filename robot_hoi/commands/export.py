@@ -6,6 +6,7 @@ import argparse
 from pathlib import Path
 
 from robot_hoi.data.cli_options import add_clip_options, clip_options
+from robot_hoi.export.recording import offset_settings, record_observations
 from robot_hoi.paths import EXPORT_DIR
 
 
@@ -49,8 +50,6 @@ def _no_checkpoint_named() -> None:
 def run_onnx(args: argparse.Namespace) -> int:
     if args.untrained:
         return run_untrained(args)
-    import numpy as np
-    import torch
 
     from robot_hoi.embodiment import build_model, load_embodiment
     from robot_hoi.errors import UserError
@@ -68,7 +67,7 @@ def run_onnx(args: argparse.Namespace) -> int:
     from robot_hoi.student.checkpoint import is_student_checkpoint
 
     if is_student_checkpoint(ckpt):
-        from robot_hoi.student.export import run_student_export
+        from robot_hoi.export.student import run_student_export
 
         return run_student_export(args, ckpt)
     model, train_cfg, _ = load_policy(ckpt)
@@ -82,13 +81,7 @@ def run_onnx(args: argparse.Namespace) -> int:
         raise UserError(f"{ckpt}: policy expects {model.num_actor_obs} observations, the task now gives "
                         f"{env.obs_dims['policy']}; the task code changed since training")
 
-    recorded = []
-    obs = env.reset()
-    with torch.no_grad():
-        while sum(len(r) for r in recorded) < args.recorded:
-            recorded.append(obs["policy"].numpy().copy())
-            obs, *_ = env.step(model.act_inference(obs["policy"]))
-    recorded_obs = np.concatenate(recorded)[: args.recorded]
+    recorded_obs = record_observations(env, lambda o: model.act_inference(o["policy"]), "policy", args.recorded)
 
     out = Path(args.output) if args.output else EXPORT_DIR / f"{ckpt.parent.parent.name}-{ckpt.parent.name}.onnx"
     metadata = policy_metadata(
@@ -128,28 +121,6 @@ def run_check(args: argparse.Namespace) -> int:
             check_against_embodiment(contract, resolve_embodiment_path(args.embodiment))
             print(f"matches embodiment {args.embodiment}")
     return 0
-
-
-def offset_settings(env_cfg) -> dict:
-    """The contract's action-offset keys for a training env: its mode ("reference" or "fixed" = the default pose),
-    the warmup length and whether the reference offset glides in over the warmup."""
-    mode = "reference" if env_cfg.action_offset == "reference" else "fixed"
-    return {"action_offset_mode": mode, "warmup_frames": env_cfg.warmup_frames,
-            "warmup_blend": env_cfg.warmup_blend and mode == "reference"}
-
-
-def record_observations(env, policy_fn, group: str, count: int):
-    """Observations of `group` met while running `policy_fn` in `env` (for export verification)."""
-    import numpy as np
-    import torch
-
-    recorded = []
-    obs = env.reset()
-    with torch.no_grad():
-        while sum(len(r) for r in recorded) < count:
-            recorded.append(obs[group].numpy().copy())
-            obs, *_ = env.step(policy_fn(obs))
-    return np.concatenate(recorded)[:count]
 
 
 def run_untrained(args: argparse.Namespace) -> int:

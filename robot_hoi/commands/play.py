@@ -91,10 +91,10 @@ def _onnx_policy(args):
     import onnxruntime as ort
     import torch
 
+    from robot_hoi.commands.train import TASK_CONFIG
     from robot_hoi.embodiment import load_embodiment
     from robot_hoi.errors import UserError
     from robot_hoi.export.onnx_export import check_onnx_file
-    from robot_hoi.rl.cli import TASK_CONFIG
     from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg
     from robot_hoi.tasks.interaction.mdp.observations import DEFAULT_STUDENT_TERMS
     from robot_hoi.utils.config import load_yaml_dataclass

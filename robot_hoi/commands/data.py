@@ -90,7 +90,7 @@ def _convert(args: argparse.Namespace) -> int:
 
 
 def _view(args: argparse.Namespace) -> int:
-    from robot_hoi.data.view import render_view
+    from robot_hoi.embodiment.clip_view import render_view
 
     if args.clip.startswith("embedded:"):
         from robot_hoi.data.synth import embedded_clip

@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from robot_hoi.data.view import heading, render_view, robot_points, robot_skeleton
+from robot_hoi.embodiment.clip_view import heading, render_view, robot_points, robot_skeleton
 
 mujoco = pytest.importorskip("mujoco")
 

@@ -22,10 +22,10 @@ def run_student_export(args: argparse.Namespace, ckpt: Path) -> int:
 
     from deploy.motion import file_sha256
     from robot_hoi.embodiment import build_model, load_embodiment
-    from robot_hoi.export.cli import offset_settings, record_observations
     from robot_hoi.export.metadata import actuator_limits, clip_identity, policy_metadata
     from robot_hoi.export.motion_sidecar import deploy_motion
     from robot_hoi.export.onnx_export import export_policy
+    from robot_hoi.export.recording import offset_settings, record_observations
     from robot_hoi.student.checkpoint import load_student
     from robot_hoi.student.reference_distill import LIMIT_MARGIN
     from robot_hoi.student.task import read_student_task, task_folder
