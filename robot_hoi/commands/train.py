@@ -57,9 +57,10 @@ def register(subparsers) -> None:
     p.add_argument("--set", dest="overrides", action="append", default=[],
                    help="override, e.g. --set env.num_envs=128 --set ppo.actor_lr=1e-4 (repeatable)")
     p.add_argument("--resume", action="store_true", help="continue each group from its latest checkpoint")
-    p.add_argument("--skip-gate", action="store_true",
+    p.add_argument("--skip-gate", action="store_true", default=None,
                    help="train on references that fail the physics gate (robot-hoi retarget: the reference replayed "
-                        "with the pelvis held loses the object or a held contact); default: refuse them")
+                        "with the pelvis held loses the object or a held contact); default: the recipe's, else "
+                        "refuse them")
     p.add_argument("--init", default=None, metavar="CHECKPOINT",
                    help="start each teacher from this policy's weights and normalisers (a base policy or another "
                         "clip's teacher; same observation layout), with fresh optimiser and counters; ignored where "
@@ -226,7 +227,7 @@ def _apply_recipe_flags(args: argparse.Namespace):
 
     recipe = load_recipe(args.recipe) if args.recipe else None
     settings = recipe.settings if recipe is not None else {}
-    defaults = {"budget": DEFAULT_BUDGET, "preset": DEFAULT_PRESET, "group": DEFAULT_GROUP}
+    defaults = {"budget": DEFAULT_BUDGET, "preset": DEFAULT_PRESET, "group": DEFAULT_GROUP, "skip_gate": False}
     for key in FLAGS:
         if getattr(args, key) is None:
             setattr(args, key, settings.get(key, defaults.get(key)))

@@ -9,6 +9,7 @@ A recipe holds only what differs from the defaults, or from the recipe its `base
     init:     as --init: a checkpoint, or none (from scratch); absent: the shipped base policy
     preset:   fast | paper, as --preset
     rewards:  a reward set (configs/tasks/rewards/), as --rewards
+    skip_gate: true to train although the reference fails the physics gate, as --skip-gate (say why beside it)
     env:      task settings, nested as in configs/tasks/interaction.yaml (what --set env.KEY=VALUE sets)
     train:    training settings, nested as in configs/train/ppo_fast.yaml: seed, model, ppo, runner (--set KEY=VALUE)
 
@@ -32,7 +33,7 @@ from robot_hoi.utils.config import apply_changes, merge_dicts, parse_override, r
 
 RECIPES_DIR = CONFIGS_DIR / "recipes"
 RECORD_FILE = "recipe.yaml"
-FLAGS = ("data", "group", "budget", "init", "preset", "rewards")  # the keys that stand for train's flags
+FLAGS = ("data", "group", "budget", "init", "preset", "rewards", "skip_gate")  # the keys that stand for train's flags
 SECTIONS = ("env", "train")  # the keys that change a config
 GROUPS = ("subject", "object", "clip")
 
@@ -77,6 +78,8 @@ def _check_layer(path: Path, layer: dict) -> None:
     for key in ("budget", "init", "preset", "rewards"):
         if key in layer and not isinstance(layer[key], str):
             raise UserError(f"{path}: {key}: expected a string, got {layer[key]!r}")
+    if "skip_gate" in layer and not isinstance(layer["skip_gate"], bool):
+        raise UserError(f"{path}: skip_gate: expected true or false, got {layer['skip_gate']!r}")
     if "group" in layer and layer["group"] not in GROUPS:
         raise UserError(f"{path}: group: {layer['group']!r} is not one of {', '.join(GROUPS)}")
     data = layer.get("data")

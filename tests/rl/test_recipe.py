@@ -88,6 +88,28 @@ def test_unknown_keys_are_refused_naming_the_file_and_the_key(tmp_path):
         _configs(load_recipe(str(_write(tmp_path, "t", {"train": {"ppo": {"lr": 1.0}}}))))
     with pytest.raises(UserError, match=r"g\.yaml: group: 'team' is not one of"):
         load_recipe(str(_write(tmp_path, "g", {"group": "team"})))
+    with pytest.raises(UserError, match=r"s\.yaml: skip_gate: expected true or false, got 'yes please'"):
+        load_recipe(str(_write(tmp_path, "s", {"skip_gate": "yes please"})))
+
+
+def test_a_recipe_can_train_past_the_gate_and_the_command_line_still_decides(tmp_path):
+    """`skip_gate: true` in a recipe stands for --skip-gate; without either the gate runs."""
+    skip = _write(tmp_path, "skip", {"data": ["embedded:push"], "skip_gate": True})
+    plain = _write(tmp_path, "plain", {"data": ["embedded:push"]})
+    assert train_args(["train", "--recipe", str(skip)]).skip_gate is True
+    assert train_args(["train", "--recipe", str(plain)]).skip_gate is False
+    assert train_args(["train", "--recipe", str(plain), "--skip-gate"]).skip_gate is True
+    assert train_args(["train"]).skip_gate is False
+
+
+def train_args(argv: list[str]):
+    """train's arguments once the recipe has filled the flags the command line left unset."""
+    from robot_hoi.cli import build_parser
+    from robot_hoi.commands.train import _apply_recipe_flags
+
+    args = build_parser().parse_args(argv)
+    _apply_recipe_flags(args)
+    return args
 
 
 class _Stop(Exception):
