@@ -96,8 +96,9 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _rate(r: dict) -> str:
-    return f"{r['rate']:.2f} [{r['lo']:.2f}, {r['hi']:.2f}]"
+def _rate(r: dict, one_trajectory: bool = False) -> str:
+    # a deterministic protocol repeats one trajectory: an interval over its copies would claim a sample it lacks
+    return f"{r['rate']:.2f} (one trajectory)" if one_trajectory else f"{r['rate']:.2f} [{r['lo']:.2f}, {r['hi']:.2f}]"
 
 
 def _mean(m: dict, fmt: str = ".1f") -> str:
@@ -112,6 +113,7 @@ def print_record(record: dict) -> None:
     from robot_hoi.utils.console import table_console
 
     console = table_console()
+    one = record["protocol"]["deterministic"]
     sections = [("", record["clips"], record["overall"])]
     if "distilled" in record:
         sections.append((" (its distilled reference)", record["distilled"]["clips"], record["distilled"]["overall"]))
@@ -127,8 +129,8 @@ def print_record(record: dict) -> None:
             for definition in evaluation.DEFINITIONS:
                 r = clip[definition]
                 duration = _mean(r["duration_s"], ".2f") + (f" / {clip_s:.2f}" if clip_s else "")
-                table.add_row(name if definition == "ours" else "", definition, _rate(r["success"]),
-                              _rate(r["interaction_success"]) if definition == "ours" else "-", duration,
+                table.add_row(name if definition == "ours" else "", definition, _rate(r["success"], one),
+                              _rate(r["interaction_success"], one) if definition == "ours" else "-", duration,
                               f"{100 * r['duration_share']['mean']:.0f} %", _mean(r["E_h_cm"]), _mean(r["E_o_cm"]),
                               f"{r['E_o_max_cm']['mean']:.1f}")
         # the heading on its own line: a table title wraps at the table's width, splitting long checkpoint paths

@@ -43,7 +43,9 @@ def load_records(folder: Path) -> list[tuple[str, dict[str, Any]]]:
     return records
 
 
-def _rate(rate: dict[str, Any]) -> str:
+def _rate(rate: dict[str, Any], one_trajectory: bool = False) -> str:
+    if one_trajectory:  # a deterministic protocol's episodes are copies of one trajectory
+        return f"{rate['rate']:.2f} (one trajectory)"
     return f"{rate['rate']:.2f} [{rate['lo']:.2f}, {rate['hi']:.2f}] ({rate['k']}/{rate['n']})"
 
 
@@ -59,12 +61,13 @@ def _start(protocol: dict[str, Any]) -> str:
 
 def eval_rows(stem: str, record: dict[str, Any]) -> list[str]:
     rows = []
+    one = record["protocol"]["deterministic"]
     for clip, r in record["clips"].items():
         ours, theirs = r["ours"], r["intermimic"]
         rows.append(" | ".join([
             f'<a id="{stem}"></a>{record.get("label", stem)}' if not rows else "", clip, _budget(record),
-            _start(record["protocol"]), _rate(ours["success"]), _rate(ours["interaction_success"]),
-            _rate(theirs["success"]), f"{100 * ours['duration_share']['mean']:.0f} %",
+            _start(record["protocol"]), _rate(ours["success"], one), _rate(ours["interaction_success"], one),
+            _rate(theirs["success"], one), f"{100 * ours['duration_share']['mean']:.0f} %",
             f"{ours['E_h_cm']['mean']:.1f}", f"{ours['E_o_cm']['mean']:.1f}"]))
     return [f"| {row} |" for row in rows]
 

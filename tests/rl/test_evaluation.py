@@ -102,6 +102,9 @@ def test_eval_reports_both_definitions_with_intervals_and_its_seeds(record, tmp_
     stand = _eval(tmp_path, "--protocol", "stand")
     durations = stand["clips"][next(iter(stand["clips"]))]["ours"]["per_episode"]["duration_s"]
     assert stand["protocol"]["deterministic"] and len(set(durations)) == 1
+    from robot_hoi.rl.results import eval_rows
+
+    assert "(one trajectory)" in eval_rows("stand", stand)[0] and "[" not in eval_rows("stand", stand)[0].split("|")[5]
 
 
 @pytest.mark.slow
