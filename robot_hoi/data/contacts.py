@@ -205,3 +205,22 @@ def infer_contacts(
         threshold=threshold,
         problems=problems,
     )
+
+
+def hand_contact_need(clip, num_frames: int | None = None) -> np.ndarray:
+    """(T, 2) bool, left / right: the hand must touch the object (any body of the hand, wrist + fingers, labelled
+    +1). Where the clip carries contacts inferred from the object's dynamics (supp. C.1) and they disagree with the
+    stored labels, inference wins: a hand inferred in contact must touch, one inferred far (-1 on all its bodies)
+    need not; neutral frames keep the stored label. Training's contact rule, the physics gate and the grasp
+    planner all read this."""
+    num_frames = len(clip.body_contact) if num_frames is None else num_frames
+    hands = [list(L_HAND), list(R_HAND)]
+    stored = np.asarray(clip.body_contact)[:num_frames]
+    need = np.stack([(stored[:, ids] > 0).any(1) for ids in hands], axis=1)
+    inferred = getattr(clip, "inferred_body_contact", None)
+    if inferred is None or not np.asarray(inferred).any():
+        return need
+    inferred = np.asarray(inferred)[:num_frames]
+    touch = np.stack([(inferred[:, ids] > 0).any(1) for ids in hands], axis=1)
+    far = np.stack([(inferred[:, ids] < 0).all(1) for ids in hands], axis=1)
+    return np.where(touch, True, np.where(far, False, need))

@@ -119,21 +119,7 @@ def build_reference(clip, motion, link_targets: str = "ik") -> ReferenceMotion:
 
 
 def _hand_contact_markers(clip, num_frames: int) -> np.ndarray:
-    """Required hand contact per frame (T, 2): any body of that hand (wrist + fingers) labelled +1.
+    """Required hand contact per frame (T, 2): robot_hoi.data.contacts.hand_contact_need."""
+    from robot_hoi.data.contacts import hand_contact_need
 
-    Where the clip carries contacts inferred from the object's dynamics (supp. C.1) and they disagree with the
-    stored labels, inference wins: a hand inferred in contact must touch, one inferred far (-1 on all its bodies)
-    need not; neutral frames keep the stored label."""
-    from robot_hoi.data.layout import BODY_NAMES
-
-    hands = [[i for i, n in enumerate(BODY_NAMES) if n.startswith(prefix) and ("Wrist" in n or n[2:-1] in
-              ("Index", "Middle", "Ring", "Pinky", "Thumb"))] for prefix in ("L_", "R_")]
-    stored = np.asarray(clip.body_contact)[:num_frames]
-    need = np.stack([(stored[:, ids] > 0).any(1) for ids in hands], axis=1)
-    inferred = getattr(clip, "inferred_body_contact", None)
-    if inferred is None or not np.asarray(inferred).any():
-        return need
-    inferred = np.asarray(inferred)[:num_frames]
-    touch = np.stack([(inferred[:, ids] > 0).any(1) for ids in hands], axis=1)
-    far = np.stack([(inferred[:, ids] < 0).all(1) for ids in hands], axis=1)
-    return np.where(touch, True, np.where(far, False, need))
+    return hand_contact_need(clip, num_frames)
