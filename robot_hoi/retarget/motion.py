@@ -32,6 +32,9 @@ _ARRAYS = {
     "anchor": 2,
     "residual": 2,
 }
+# Arrays a file may lack (older files): the clip's own object path, which is object_pos / object_quat_wxyz where
+# nothing moved the object (evaluation reports E_o against it)
+_OPTIONAL_ARRAYS = {"source_object_pos": 2, "source_object_quat_wxyz": 2}
 
 
 @dataclass
@@ -53,6 +56,10 @@ class RobotMotion:
     embodiment: str
     scale: float
     meta: dict = field(default_factory=dict)  # free-form: source clip, solver settings, report
+    # the clip's own robot-space object path, before anything the retarget changed for its contacts (T, 3) / (T, 4);
+    # None: object_pos / object_quat_wxyz
+    source_object_pos: np.ndarray | None = None
+    source_object_quat_wxyz: np.ndarray | None = None
 
     @property
     def num_frames(self) -> int:
@@ -60,7 +67,11 @@ class RobotMotion:
 
     def __post_init__(self) -> None:
         T = self.qpos.shape[0]
-        for name, ndim in _ARRAYS.items():
+        if self.source_object_pos is None:
+            self.source_object_pos = np.array(self.object_pos, copy=True)
+        if self.source_object_quat_wxyz is None:
+            self.source_object_quat_wxyz = np.array(self.object_quat_wxyz, copy=True)
+        for name, ndim in {**_ARRAYS, **_OPTIONAL_ARRAYS}.items():
             arr = getattr(self, name)
             if arr.ndim != ndim or arr.shape[0] != T:
                 raise DataError(f"RobotMotion.{name}: shape {arr.shape} does not fit {T} frames")
@@ -79,7 +90,7 @@ class RobotMotion:
             raise DataError(f"{path}: motion files end in .npz")
         buf = io.BytesIO()
         np.savez_compressed(buf, **{k: np.asarray(getattr(self, k), dtype=np.float32 if k != "qpos" else np.float64)
-                                    for k in _ARRAYS})
+                                    for k in {**_ARRAYS, **_OPTIONAL_ARRAYS}})
         atomic_write_bytes(path, buf.getvalue())
         side = path.with_suffix(".json")
         sidecar = {
@@ -116,6 +127,7 @@ class RobotMotion:
                 if missing:
                     raise DataError(f"{path}: missing arrays {', '.join(missing)}")
                 arrays = {k: np.asarray(npz[k], dtype=np.float64) for k in _ARRAYS}
+                arrays |= {k: np.asarray(npz[k], dtype=np.float64) for k in _OPTIONAL_ARRAYS if k in npz.files}
         except (OSError, ValueError) as exc:
             raise DataError(f"{path}: not a readable npz motion file ({exc})") from exc
         try:

@@ -51,6 +51,21 @@ def test_round_trip(tmp_path):
     assert json.loads(side.read_text())["quaternion_convention"] == "wxyz"
 
 
+def test_source_object_path_is_kept_and_older_files_default_to_the_object_path(tmp_path):
+    m = _motion()
+    np.testing.assert_array_equal(m.source_object_pos, m.object_pos)  # nothing moved the object
+    moved = RobotMotion(**{**m.__dict__, "source_object_pos": m.object_pos + 0.1})
+    back = RobotMotion.load(moved.save(tmp_path / "moved.npz")[0])
+    np.testing.assert_allclose(back.source_object_pos, m.object_pos + 0.1, atol=1e-6)
+    np.testing.assert_allclose(back.object_pos, m.object_pos, atol=1e-6)
+    npz, _ = m.save(tmp_path / "old.npz")
+    with np.load(npz) as data:  # a file written before the field existed
+        arrays = {k: data[k] for k in data.files if not k.startswith("source_")}
+    np.savez(npz, **arrays)
+    old = RobotMotion.load(npz)
+    np.testing.assert_allclose(old.source_object_quat_wxyz, old.object_quat_wxyz)
+
+
 def test_shape_mismatch_is_rejected():
     m = _motion()
     with pytest.raises(DataError, match="anchor"):

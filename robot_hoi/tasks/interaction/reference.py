@@ -31,6 +31,10 @@ class ReferenceMotion:
     object_points: Tensor       # (P, 3) surface samples in the object frame
     d_hat: Tensor               # (T, L, 3) vectors from each reference link to its nearest object surface point
     name: str = "clip"
+    # the clip's own object path (RobotMotion.source_object_*): object_pos / object_quat_wxyz unless the retarget
+    # moved the object for its contacts; evaluation reports E_o against it as well
+    source_object_pos: Tensor | None = None         # (T, 3)
+    source_object_quat_wxyz: Tensor | None = None   # (T, 4)
 
     @property
     def num_frames(self) -> int:
@@ -115,6 +119,8 @@ def build_reference(clip, motion, link_targets: str = "ik") -> ReferenceMotion:
         object_points=points,
         d_hat=nearest_surface_vectors(link_pos, points_world),
         name=clip.name,
+        source_object_pos=t(motion.source_object_pos),
+        source_object_quat_wxyz=t(motion.source_object_quat_wxyz),
     )
 
 
