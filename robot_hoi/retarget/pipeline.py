@@ -16,6 +16,9 @@ from robot_hoi.retarget.executable import (
     smooth_joints,
     squeeze_offsets,
 )
+from robot_hoi.retarget.faces import centre_of_mass, hull_mass
+from robot_hoi.retarget.grasp import GraspPlan, GraspSettings, apply_plan, plan_grasps
+from robot_hoi.retarget.hand_geometry import hand_geometry
 from robot_hoi.retarget.hands import GraspRule, HandJoints, closure_profile, finger_angles, holding
 from robot_hoi.retarget.ik import IKResult, IKSettings, IKSolver
 from robot_hoi.retarget.kinematics import (
@@ -45,6 +48,7 @@ class RetargetOptions:
     ik: IKSettings = field(default_factory=IKSettings)  # ik.solver: "dls" | "qp"
     qp: QPSettings = field(default_factory=QPSettings)  # the QP retarget's settings (ik.solver "qp")
     grasp: GraspRule = field(default_factory=GraspRule)
+    grasp_plan: GraspSettings = field(default_factory=GraspSettings)  # robot grasps in held segments (grasp.py)
     use_landmarks: bool = True  # IK on anatomical landmarks (landmarks.py) instead of the raw link origins
     executable: ExecutableSettings = field(default_factory=ExecutableSettings)  # smoothing + grasp squeeze
     # The IK keeps the arm out of the object from this many bodies above the wrist-yaw link down to the fingertips
@@ -109,9 +113,11 @@ def finger_presets(
 
 
 def retarget_targets(
-    model: mujoco.MjModel, cfg, targets: RobotTargets, options: RetargetOptions | None = None
+    model: mujoco.MjModel, cfg, targets: RobotTargets, options: RetargetOptions | None = None,
+    plan: GraspPlan | None = None,
 ) -> RetargetResult:
-    """Solve the IK for prepared targets and package the motion."""
+    """Solve the IK for prepared targets and package the motion; `plan`: the grips the targets were moved to
+    (grasp.apply_plan), whose finger postures, squeeze and finger press then replace the closure rule's."""
     options = options or RetargetOptions()
     q_default = default_qpos(model, cfg)
     finger_joint_names = {j for hand in hand_joints(cfg) for j in hand.joint_names}
@@ -125,6 +131,8 @@ def retarget_targets(
         probes = hand_probe_points(model, wrist_ids, _ancestors(model, wrist_ids, options.arm_probe_levels))
     solver = IKSolver(model, targets.link_names, body_joints, q_default, feet, options.ik, landmarks, probes)
     preset, hold = finger_presets(model, cfg, targets, q_default, options.grasp)
+    if plan is not None:
+        hold = _apply_plan_fingers(model, cfg, plan, preset, hold)
 
     start = time.perf_counter()
     track = None
@@ -147,7 +155,7 @@ def retarget_targets(
         limited = result.qpos.copy()  # the push-out may step fast again: the speed limit has the last word
         limited[:, upper_qadr] = limit_speed(limited[:, upper_qadr], options.executable.max_joint_speed / targets.fps)
         result = solver.evaluate(limited, targets.pos, result.iterations, track)
-    squeeze = _squeeze(model, cfg, result.qpos, hold, targets.fps, options, solver, track)
+    squeeze = _squeeze(model, cfg, result.qpos, hold, targets.fps, options, solver, track, plan)
     legs = options.executable.compensate_leg_loads
     soles = (solver.sole_body, solver.sole_local) if legs and len(solver.sole_body) else None
     loads = _load_compensation(model, result.qpos, body_joints if legs else upper, hold, targets, options, soles)
@@ -177,6 +185,7 @@ def retarget_targets(
             "ik": asdict(options.ik),
             **({"qp": asdict(options.qp), "qp_fallbacks": qp_fallbacks} if qp_fallbacks is not None else {}),
             "grasp": asdict(options.grasp),
+            "grasp_plan": asdict(options.grasp_plan),
             "executable": asdict(options.executable),
             "landmarks": {k: [f, list(off)] for k, (f, off) in landmarks.items()},
         },
@@ -220,22 +229,45 @@ def _depenetrate(solver: IKSolver, result: IKResult, targets: RobotTargets, trac
 
 
 def _squeeze(model: mujoco.MjModel, cfg, qpos: np.ndarray, hold: dict[str, np.ndarray], fps: float,
-             options: RetargetOptions, solver: IKSolver, track) -> np.ndarray:
+             options: RetargetOptions, solver: IKSolver, track, plan: GraspPlan | None = None) -> np.ndarray:
     """(T, nq) grasp-squeeze offsets for the PD targets (executable.py), ramped like the finger closure (at the
     same rate; flat fingers, closure 0, still squeeze). Into the surface needs the object `track` (None: no
-    object) and the solver's hand probes."""
+    object) and the solver's hand probes. Where a `plan` grips, its hands squeeze along its directions instead
+    (ramped by its squeeze weight) and its fingers close its `press` further."""
     settings = options.executable
     into_surface = settings.squeeze_toward == "surface"
     sides = ("left", "right")
+    out = np.zeros_like(qpos)
     if settings.squeeze_depth <= 0 or set(hold) != set(sides) or (into_surface and track is None):
-        return np.zeros_like(qpos)
-    full_stroke = replace(options.grasp, closure=1.0)
-    ramp = {side: closure_profile(hold[side], fps, full_stroke) for side in sides}
+        return out
     wrists = {side: f"{side}_wrist_yaw_link" for side in sides}
     arms = {side: [f"{side}_shoulder_pitch_joint", f"{side}_shoulder_roll_joint", f"{side}_shoulder_yaw_joint",
                    f"{side}_elbow_joint"] for side in sides}
+    full_stroke = replace(options.grasp, closure=1.0)
+    ramp = {side: closure_profile(hold[side], fps, full_stroke) for side in sides}
+    if plan is not None:
+        ramp = {side: np.where(plan.blend[side] > 0, 0.0, ramp[side]) for side in sides}
+        out += squeeze_offsets(model, qpos, plan.squeeze, wrists, arms, settings, plan.into)
+        for hand in hand_joints(cfg):
+            adr = model.jnt_qposadr[joint_ids(model, hand.joint_names)]
+            out[:, adr] += plan.squeeze[hand.side][:, None] * plan.press[hand.side]
+    if not any(r.any() for r in ramp.values()):
+        return out
     directions = _into_surface(solver, qpos, track, wrists, ramp) if into_surface else None
-    return squeeze_offsets(model, qpos, ramp, wrists, arms, settings, directions)
+    return out + squeeze_offsets(model, qpos, ramp, wrists, arms, settings, directions)
+
+
+def _apply_plan_fingers(model: mujoco.MjModel, cfg, plan: GraspPlan, preset: np.ndarray,
+                        hold: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """In place: the finger channels of `preset` blended to the plan's grip postures; returns the hold flags
+    (the plan's where it grips, the closure rule's elsewhere)."""
+    out = dict(hold)
+    for hand in hand_joints(cfg):
+        w = plan.blend[hand.side][:, None]
+        adr = model.jnt_qposadr[joint_ids(model, hand.joint_names)]
+        preset[:, adr] = (1.0 - w) * preset[:, adr] + w * plan.channel_angles[hand.side]
+        out[hand.side] = np.where(plan.blend[hand.side] > 0, plan.hold(hand.side), hold[hand.side])
+    return out
 
 
 def _into_surface(solver: IKSolver, qpos: np.ndarray, track, wrists: dict[str, str],
@@ -296,6 +328,18 @@ def robot_hand_lengths(model: mujoco.MjModel, link_map: dict[str, str]) -> dict[
     return lengths
 
 
+def clip_grasps(model: mujoco.MjModel, cfg, clip, targets: RobotTargets, options: RetargetOptions) -> GraspPlan:
+    """The grips (grasp.py) for a clip's targets: its held segments, the convex pieces the simulation collides
+    with and their centre of mass."""
+    from robot_hoi.data.contacts import hand_contact_need
+
+    pieces = clip.object.collision_pieces(options.mapping.object_collision)
+    geometries = {side: hand_geometry(model, cfg, side, targets.link_names, targets.human_names)
+                  for side in cfg.hands}
+    return plan_grasps(targets, hand_contact_need(clip, targets.num_frames), pieces,
+                       centre_of_mass(clip.object.vertices, clip.object.faces), geometries, options.grasp_plan)
+
+
 def retarget_clip(
     clip,
     cfg,
@@ -311,6 +355,13 @@ def retarget_clip(
         model = build_model(cfg)
     targets = targets_from_clip(clip, cfg, scale=scale, mapping=options.mapping,
                                 hand_length=robot_hand_lengths(model, cfg.link_map))
-    out = retarget_targets(model, cfg, targets, options)
+    plan = None
+    if options.grasp_plan.enabled:
+        plan = clip_grasps(model, cfg, clip, targets, options)
+        targets = apply_plan(targets, plan, options.grasp_plan.weight)
+        density = options.grasp_plan.object_density
+        if targets.object_mass_kg is None and density:
+            targets = replace(targets, object_mass_kg=hull_mass(clip.object.vertices, clip.object.faces, density))
+    out = retarget_targets(model, cfg, targets, options, plan)
     out.motion.meta["clip"] = str(getattr(clip, "name", "") or getattr(clip, "source", ""))
     return out

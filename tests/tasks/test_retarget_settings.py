@@ -144,3 +144,24 @@ def test_squeeze_depth_scales_the_arm_squeeze_and_guards_the_cache(tmp_path):
         factory.load_or_retarget(clip, embodiment, tmp_path, factory.retarget_options(InteractionEnvCfg()))
     with pytest.raises(UserError, match=r"env.retarget_squeeze_depth must be within"):
         factory.retarget_options(InteractionEnvCfg(retarget_squeeze_depth=-0.1))
+
+
+def test_grasp_setting_reaches_the_reference_and_guards_the_cache(tmp_path):
+    """env.retarget_grasp plans the held segments' hands (retarget/grasp.py) with the task's object density; a
+    cache made without it is refused."""
+    embodiment = load_embodiment("g1_inspire")
+    clip = factory.load_source("embedded:lift_place")
+    cfg = InteractionEnvCfg(num_envs=2, backend="cpu", retarget_grasp=True, object_density=40.0)
+    options = factory.retarget_options(cfg)
+    assert options.grasp_plan.enabled and options.grasp_plan.object_density == 40.0
+    assert not factory.retarget_options(InteractionEnvCfg()).grasp_plan.enabled
+    planned = factory.load_or_retarget(clip, embodiment, tmp_path, options)
+    plain = factory.load_or_retarget(clip, embodiment, None)
+    assert planned.meta["grasp_plan"]["enabled"]
+    wrists = [planned.link_names.index(n) for n in ("left_wrist_yaw_link", "right_wrist_yaw_link")]
+    assert np.abs(planned.link_pos[:, wrists] - plain.link_pos[:, wrists]).max() > 0.03  # the hands moved
+    np.testing.assert_allclose(planned.object_pos, plain.object_pos)  # the object did not
+    env = factory.make_env([clip], cfg, embodiment, cache=tmp_path)
+    np.testing.assert_allclose(env.references[0].source_object_pos.numpy(), planned.object_pos, atol=1e-5)
+    with pytest.raises(UserError, match=r"grasp planning on, the task asks for it off"):
+        factory.load_or_retarget(clip, embodiment, tmp_path, factory.retarget_options(InteractionEnvCfg()))

@@ -179,6 +179,9 @@ class InteractionEnvCfg:
     # the retarget's IK: "dls" (damped least squares + repairs) | "qp" (constrained QP, retarget/qp.py); None: the
     # retarget's default. Recorded in the cached retarget
     retarget_solver: str | None = None
+    # hands in held segments: the human's placement (False) or grasps planned for the Inspire hand (True,
+    # retarget/grasp.py: opposing faces, pushes); None: the retarget's default. Recorded in the cached retarget
+    retarget_grasp: bool | None = None
     # what the object collides as: "hull" (its convex hull; checkpoints without the key) | "decomposed" (its convex
     # pieces, ObjectAsset.convex_parts: a hand reaches under a table's top). The retarget keeps the hands out of
     # the same shape; recorded in the cached retarget like leg loads

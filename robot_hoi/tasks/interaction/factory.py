@@ -96,6 +96,7 @@ _RETARGET_SETTINGS = (
     ("object_collision", ("mapping", "object_collision"), "object collision shape"),
     ("retarget_fingertip_underside_reach", ("mapping", "fingertip_underside_reach"), "fingertip underside reach"),
     ("retarget_solver", ("ik", "solver"), "IK solver"),
+    ("retarget_grasp", ("grasp_plan", "enabled"), "grasp planning"),
 )
 
 
@@ -119,6 +120,8 @@ def retarget_options(env_cfg: InteractionEnvCfg | None = None):
         value = getattr(env_cfg, field, None) if env_cfg is not None else None
         if value is not None:
             options = replace(options, **{group: replace(getattr(options, group), **{name: value})})
+    if env_cfg is not None:  # planned grips carry the weight the simulation gives the object
+        options = replace(options, grasp_plan=replace(options.grasp_plan, object_density=env_cfg.object_density))
     return options
 
 
