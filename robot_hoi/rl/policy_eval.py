@@ -120,22 +120,17 @@ def _training_facts(ckpt: Path | None) -> dict[str, Any]:
     """What the checkpoint says of its training: iteration, samples, training time, the run's recipe."""
     if ckpt is None:
         return {}
-    import json
-
     from robot_hoi.rl.checkpoint import read_checkpoint
+    from robot_hoi.rl.recipe import RECORD_FILE
 
     data = read_checkpoint(ckpt)
     facts = {"iteration": int(data.get("iteration", 0)), "samples": int(data.get("total_samples", 0)),
              "train_time_s": round(float(data.get("total_time_s", 0.0)), 1)}
-    recipe = ckpt.parent / "recipe.yaml"
-    if recipe.is_file():
+    # the run folder (above the group folders) records the recipe it trained with
+    recipe = next((folder / RECORD_FILE for folder in (ckpt.parent, ckpt.parent.parent)
+                   if (folder / RECORD_FILE).is_file()), None)
+    if recipe is not None:
         facts["recipe_file"] = str(recipe)
-    info = ckpt.parent / "run_info.json"
-    if info.is_file():
-        try:
-            facts["recipe"] = json.loads(info.read_text()).get("recipe")
-        except ValueError:
-            pass
     return facts
 
 
