@@ -90,7 +90,34 @@ class _Writer:
 NO_WRITES = {"errors": 0, "lost": 0, "last_error": None}
 
 
-class EventLog:
+class _BackgroundLog:
+    """What the event log and the tick recorder share: records go to the disk on a _Writer thread (None: nothing is
+    written); `_written` keeps that writer after close() for report()."""
+
+    _writer: _Writer | None
+    _written: _Writer | None
+
+    def _hand_over(self) -> None:
+        """Pass every pending record to the writer, to be written and fsynced."""
+        raise NotImplementedError
+
+    def sync(self, wait_s: float | None = None) -> None:
+        """Hand everything pending to the writer, to be written and fsynced; wait up to wait_s for the disk."""
+        if self._writer is None:
+            return
+        self._hand_over()
+        if wait_s is not None:
+            self._writer.wait_idle(wait_s)
+
+    def wait_idle(self, timeout_s: float) -> bool:
+        return True if self._writer is None else self._writer.wait_idle(timeout_s)
+
+    def report(self) -> dict:
+        """Failed writes, the records they lost and the last error (summary.json 'logs')."""
+        return NO_WRITES.copy() if self._written is None else self._written.report()
+
+
+class EventLog(_BackgroundLog):
     """Structured decision log: kept in memory (for the summary and tests) and appended to events.jsonl."""
 
     def __init__(self, clock: Clock, path: str | Path | None = None, max_in_memory: int = 10000,
@@ -164,20 +191,8 @@ class EventLog:
             except OSError:
                 pass
 
-    def sync(self, wait_s: float | None = None) -> None:
-        """Hand everything pending to the writer, to be written and fsynced; wait up to wait_s for it."""
-        if self._writer is None:
-            return
+    def _hand_over(self) -> None:
         self._submit(sync=True, now=self.clock.now())
-        if wait_s is not None:
-            self._writer.wait_idle(wait_s)
-
-    def wait_idle(self, timeout_s: float) -> bool:
-        return True if self._writer is None else self._writer.wait_idle(timeout_s)
-
-    def report(self) -> dict:
-        """Failed writes, events they lost and the last error (summary.json 'logs')."""
-        return NO_WRITES.copy() if self._written is None else self._written.report()
 
     def of_kind(self, event: str) -> list[dict]:
         return [e for e in self.events if e["event"] == event]
@@ -194,7 +209,7 @@ class EventLog:
         self._writer = None
 
 
-class TickRecorder:
+class TickRecorder(_BackgroundLog):
     """Collects per-tick arrays; a background thread writes them as npz chunks of up to `chunk_ticks` ticks, at
     least every `flush_every_s` seconds of run time, and at sync() (fsynced)."""
 
@@ -237,20 +252,8 @@ class TickRecorder:
         np.savez(buffer, **arrays)
         atomic_write_bytes(path, buffer.getvalue(), fsync=sync)
 
-    def sync(self, wait_s: float | None = None) -> None:
-        """Write the rows held so far as a chunk (fsynced); wait up to wait_s for the disk."""
-        if self._writer is None:
-            return
+    def _hand_over(self) -> None:
         self._flush(sync=True)
-        if wait_s is not None:
-            self._writer.wait_idle(wait_s)
-
-    def wait_idle(self, timeout_s: float) -> bool:
-        return True if self._writer is None else self._writer.wait_idle(timeout_s)
-
-    def report(self) -> dict:
-        """Failed chunk writes, ticks they lost and the last error (summary.json 'logs')."""
-        return NO_WRITES.copy() if self._written is None else self._written.report()
 
     def close(self, timeout_s: float = 10.0) -> None:
         if self._writer is None:
