@@ -8,9 +8,9 @@ data.contacts.hand_contact_need) gets contacts chosen on the sides of the convex
 with (faces.py), by what the object does while held:
 
 * "claw" (two hands lift or hold it): the pair of roughly opposite sides with horizontal normals whose grip
-  points lie nearest the human's hands. The grasp axis passes over the centre of mass (at most `straddle_m`
-  beside it; an object hanging below the axis stays upright, one balanced above it topples) at the hands'
-  height. Each hand keeps the human hand's orientation turned palm into its side, fingers curled `closure` with
+  points lie nearest the human's hands. The grasp axis passes over the centre of mass, at the hands' height
+  but at least `hang_m` above it (an object hanging below the axis stays upright, one balanced above it
+  topples). Each hand keeps the human hand's orientation turned palm into its side, fingers curled `closure` with
   the pads on the side: the G1 wrist and forearm and the open Inspire thumb stand proud of the palm, so a flat
   palm cannot lie on a large side (hand_geometry.py).
 * "push" (the object slides away from the hands, which are behind its centre of mass, and is not lifted): palms
@@ -21,8 +21,10 @@ with (faces.py), by what the object does while held:
   curled under it; the PD targets pull toward the hands and up.
 * a one-hand lift keeps the human's placement (handles are not detected).
 
-The fingers close through the hand's couplings: a claw to `closure`, a push or a hook until they first touch
-the object (HandGeometry.contact_closure); the PD targets close them `press` further and move the wrist into the
+The fingers close through the hand's couplings, each finger on its own: a claw's longest finger to `closure` with
+its pad on the face and every other finger until its pad reaches the face too (one pad per hand on one line
+through the object let the box pivot about the grasp axis, 30 degrees in `sub3_largebox_003`'s lift), a push's or
+a hook's fingers each until it first touches the object (HandGeometry.finger_closures); the PD targets close them `press` further and move the wrist into the
 contact (executable.squeeze_offsets), ramped in after the held segment starts (a hand squeezed while arriving
 sticks where it lands) and, for two hands, only while both hold. The wrist and fingertip targets ride with the
 object's pose, so its path is unchanged; they glide from the human's over `blend_s` before a held segment (in
@@ -59,7 +61,12 @@ class GraspSettings:
     # wrists over 0.3 s, which the arms' PD servos trailed by 10 cm
     blend_s: float = 0.8
     approach_m: float = 0.05     # m out along the face normal where the glide in ends its approach
-    straddle_m: float = 0.03     # m a lift's grasp axis may pass beside (or below) the centre of mass
+    # A lifted object turns about the grasp axis until its centre of mass hangs below it; only the contacts'
+    # torsional friction (~0.3 N m per hand here) resists that. So a lift's axis passes at most `beside_m` beside
+    # the centre of mass (sub3_largebox_003 turned 30 degrees with 3 cm) and at least `hang_m` above it (a box
+    # balanced on an axis below its centre topples), where the faces reach that high.
+    beside_m: float = 0.005
+    hang_m: float = 0.05
     lift_m: float = 0.1          # m the object rises in an episode for it to count as lifted (a drag lifts a few cm)
     move_m: float = 0.05         # m the object slides in an episode for it to count as pushed or dragged
     edge_margin_m: float = 0.02  # m a palm centre stays inside its face's edges
@@ -86,7 +93,7 @@ class Grip:
     point: np.ndarray        # where the hand touches the face
     rotation: np.ndarray     # (3, 3) wrist orientation
     wrist: np.ndarray        # wrist link origin
-    closure: float           # finger stroke fraction of the grip
+    closure: np.ndarray      # (6,) stroke fraction of each finger channel in the grip
     into: np.ndarray         # unit direction the PD targets squeeze the wrist in
 
 
@@ -167,7 +174,7 @@ def opposing_faces(faces: list[Face], episode: Episode, com: np.ndarray, setting
 def opposing_points(faces: dict[str, Face], episode: Episode, com: np.ndarray,
                     settings: GraspSettings) -> dict[str, np.ndarray]:
     """Grip points on two opposite faces: the grasp axis through the hands' mean, for a lift moved over the
-    centre of mass (at most `straddle_m` beside it, and at most that below it)."""
+    centre of mass (at most `beside_m` beside it and at least `hang_m` above it, within the faces' edges)."""
     normal = faces["left"].normal
     offset = np.mean([episode.palm(s) for s in SIDES], axis=0) - com
     offset -= (offset @ normal) * normal
@@ -177,7 +184,7 @@ def opposing_points(faces: dict[str, Face], episode: Episode, com: np.ndarray,
         height = float(offset @ vertical)
         across = offset - height * vertical
         size = max(float(np.linalg.norm(across)), 1e-9)
-        offset = max(height, -settings.straddle_m) * vertical + across * min(1.0, settings.straddle_m / size)
+        offset = max(height, settings.hang_m) * vertical + across * min(1.0, settings.beside_m / size)
     return {side: face.clamp(com + offset, settings.edge_margin_m) for side, face in faces.items()}
 
 
@@ -324,7 +331,7 @@ def episode_grips(episode: Episode, faces: list[Face], planes: HullPlanes, com: 
                 point = face.clamp(point, s.edge_margin_m)
                 point, rotation, wrist = hook_pose(geometries[side], face, point, episode.up, planes, s.palm_gap_m,
                                                    s.hook_below_m)
-                closure = geometries[side].contact_closure(rotation, wrist, planes, s.max_closure)
+                closure = geometries[side].finger_closures(rotation, wrist, planes, 0.0, s.max_closure)
                 into = episode.motion + episode.up  # pull toward the hands and lift the edge
                 grips.append(Grip(side, "hook", span, face, point, rotation, wrist, closure, into / np.linalg.norm(into)))
             return grips
@@ -336,7 +343,7 @@ def episode_grips(episode: Episode, faces: list[Face], planes: HullPlanes, com: 
         grips = []
         for side, point in side_by_side(episode, com, lateral / np.linalg.norm(lateral)).items():
             point, rotation, wrist = push_pose(geometries[side], top, point, episode.motion, planes, s.palm_gap_m)
-            closure = geometries[side].contact_closure(rotation, wrist, planes, s.max_closure)
+            closure = geometries[side].finger_closures(rotation, wrist, planes, 0.0, s.max_closure)
             into = episode.motion - 0.25 * episode.up  # mostly ahead: pressing down adds floor friction
             grips.append(Grip(side, "push", span, top, point, rotation, wrist, closure, into / np.linalg.norm(into)))
         return grips
@@ -352,7 +359,9 @@ def episode_grips(episode: Episode, faces: list[Face], planes: HullPlanes, com: 
         if (rotation @ geo.axis) @ (point - episode.arms[side]) <= 0:  # fingers back toward the shoulder
             rotation = finger_rotation(geo, face, finger_direction(face, point, episode.arms[side], episode.up))
         rotation, wrist = claw_pose(geo, face, point, rotation, s.closure, planes, s.palm_gap_m)
-        grips.append(Grip(side, "claw", span, face, point, rotation, wrist, s.closure, -face.normal))
+        # the longest finger's pad sets the wrist; the others close further until theirs reach the face too
+        closure = geo.finger_closures(rotation, wrist, planes, s.closure, s.max_closure, s.palm_gap_m + 1e-4)
+        grips.append(Grip(side, "claw", span, face, point, rotation, wrist, closure, -face.normal))
     return grips
 
 

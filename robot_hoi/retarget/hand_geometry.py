@@ -9,6 +9,11 @@ couplings (kinematics.apply_joint_couplings): one closure drives every finger ch
 On the G1 with Inspire hands the open thumb stands ~1 cm proud of the palm (`reach` 3.3-4.2 cm against the
 palm's own 2.1 cm), and the wrist and forearm capsules (radius 2.8 and 3 cm) are thicker than the palm is deep:
 a flat palm cannot lie on a large face, which is why grasp.py holds faces with curled fingers.
+
+Each finger is a chain of its own, so one table serves closures per channel too (`at` with a (6,) closure): a
+probe or link moves with the one channel it hangs from (`probe_channel`, `link_channel`). The Inspire fingers
+differ in length (the middle one reaches furthest), so one closure for all lays a single pad on a flat face;
+`finger_closures` closes each finger until its own pad arrives.
 """
 
 from __future__ import annotations
@@ -43,38 +48,59 @@ class HandGeometry:
     reach: float                 # how far the non-finger probes (palm, open thumb) reach along palm_normal
     open_rad: np.ndarray         # (6,) channel angles: fingers open, thumb laid open
     closed_rad: np.ndarray       # (6,) fingers closed, thumb laid open
+    probe_channel: np.ndarray    # (N,) the channel a probe moves with, -1 for none (palm, wrist, open thumb)
+    link_channel: np.ndarray     # (K,) the same for the links
 
     def channel_angles(self, closure) -> np.ndarray:
-        """(..., 6) channel angles at finger closures (...)."""
-        closure = np.asarray(closure, dtype=np.float64)[..., None]
-        return self.open_rad + closure * (self.closed_rad - self.open_rad)
+        """(6,) channel angles at a closure: one stroke fraction for every finger, or one per channel (6,)."""
+        return self.open_rad + np.asarray(closure, dtype=np.float64) * (self.closed_rad - self.open_rad)
 
-    def at(self, closure: float) -> tuple[np.ndarray, np.ndarray]:
-        """(link positions (K, 3), probe positions (N, 3)) at a closure, interpolated between the table's rows."""
-        c = float(np.clip(closure, self.closures[0], self.closures[-1]))
-        i = int(min(np.searchsorted(self.closures, c, side="right") - 1, len(self.closures) - 2))
-        s = (c - self.closures[i]) / (self.closures[i + 1] - self.closures[i])
-        return ((1 - s) * self.link_local[i] + s * self.link_local[i + 1],
-                (1 - s) * self.probe_local[i] + s * self.probe_local[i + 1])
+    def at(self, closure) -> tuple[np.ndarray, np.ndarray]:
+        """(link positions (K, 3), probe positions (N, 3)) at a closure (a stroke fraction, or one per channel
+        (6,)), interpolated between the table's rows."""
+        per_channel = np.broadcast_to(np.asarray(closure, dtype=np.float64), (6,))
+        return (self._interpolate(self.link_local, per_channel, self.link_channel),
+                self._interpolate(self.probe_local, per_channel, self.probe_channel))
 
-    def contact_closure(self, rotation: np.ndarray, wrist: np.ndarray, planes: HullPlanes, most: float) -> float:
-        """The smallest closure at which a finger probe sphere of the hand at (`rotation`, `wrist`, object frame)
-        touches the object (its convex `planes`), or `most` when none does up to there."""
-        def touches(c: float) -> bool:
-            world = self.at(c)[1][self.finger] @ rotation.T + wrist
-            return bool((planes.signed_distance(world)[0] - self.probe_radius[self.finger]).min() <= 0.0)
+    def _interpolate(self, table: np.ndarray, per_channel: np.ndarray, channel: np.ndarray) -> np.ndarray:
+        c = np.clip(np.where(channel >= 0, per_channel[channel], 0.0), self.closures[0], self.closures[-1])
+        i = np.minimum(np.searchsorted(self.closures, c, side="right") - 1, len(self.closures) - 2)
+        s = ((c - self.closures[i]) / (self.closures[i + 1] - self.closures[i]))[:, None]
+        rows = np.arange(table.shape[1])
+        return (1 - s) * table[i, rows] + s * table[i + 1, rows]
 
-        grid = self.closures[self.closures <= most]
-        hit = next((k for k, c in enumerate(grid) if touches(c)), None)
-        if hit is None:
-            return float(most)
-        if hit == 0:
-            return float(grid[0])
-        lo, hi = float(grid[hit - 1]), float(grid[hit])
-        for _ in range(6):  # bisect to ~1e-3 of the stroke
-            mid = 0.5 * (lo + hi)
-            lo, hi = (lo, mid) if touches(mid) else (mid, hi)
-        return lo
+    def finger_closures(self, rotation: np.ndarray, wrist: np.ndarray, planes: HullPlanes, start: float,
+                        most: float, clearance: float = 0.0) -> np.ndarray:
+        """(6,) per channel: from `start`, the closure at which each finger of the hand at (`rotation`, `wrist`,
+        object frame) first comes within `clearance` of the object (its convex `planes`); a finger that does not
+        by `most` keeps the closure where it came nearest. Non-finger channels get `start`."""
+        grid = np.concatenate([[start], self.closures[(self.closures > start) & (self.closures < most)], [most]])
+        gaps = np.array([self._channel_gaps(g, rotation, wrist, planes) for g in grid])  # (G, 6)
+        out = np.full(6, float(start))
+        for k in np.unique(self.probe_channel[self.probe_channel >= 0]):
+            hit = np.flatnonzero(gaps[:, k] <= clearance)
+            if not len(hit):
+                out[k] = grid[int(np.argmin(gaps[:, k]))]
+                continue
+            if hit[0] == 0:
+                continue
+            lo, hi = float(grid[hit[0] - 1]), float(grid[hit[0]])
+            for _ in range(6):  # bisect to ~1e-3 of the stroke
+                mid = 0.5 * (lo + hi)
+                lo, hi = (lo, mid) if self._channel_gaps(mid, rotation, wrist, planes)[k] <= clearance else (mid, hi)
+            out[k] = hi
+        return out
+
+    def _channel_gaps(self, closure: float, rotation, wrist, planes: HullPlanes) -> np.ndarray:
+        """(6,) each channel's nearest probe surface to the object at one closure (inf for channels without)."""
+        world = self.at(closure)[1] @ rotation.T + wrist
+        gap = planes.signed_distance(world)[0] - self.probe_radius
+        out = np.full(6, np.inf)
+        for k in range(6):
+            mine = self.probe_channel == k
+            if mine.any():
+                out[k] = gap[mine].min()
+        return out
 
     def sink(self, rotation: np.ndarray, wrist: np.ndarray, planes: HullPlanes, closure: float) -> float:
         """How deep (m, >= 0) the hand's probe spheres at `closure` sink into the object."""
@@ -113,6 +139,7 @@ def hand_geometry(model: mujoco.MjModel, cfg, side: str, link_names, human_names
         link_local.append((link_positions(data, resolved) - origin) @ rot)
         probe_local.append((world - origin) @ rot)
     link_local, probe_local = np.array(link_local), np.array(probe_local)
+    probe_channel, link_channel = _channels(model, cfg, side, probes, resolved, q0, qadr, open_rad, closed_rad)
     moves = np.linalg.norm(probe_local[-1] - probe_local[0], axis=-1) > 1e-6
     axis = _unit(probe_local[0][moves].mean(0))
     curl = (probe_local[len(closures) // 3] - probe_local[0])[moves].mean(0)
@@ -124,7 +151,34 @@ def hand_geometry(model: mujoco.MjModel, cfg, side: str, link_names, human_names
     thumb = across if (probe_local[0][on_thumb] @ across).mean() >= 0 else -across
     reach = float((probe_local[0][rest] @ normal + probes.radius[rest]).max())
     return HandGeometry(side, tuple(links), closures, link_local, probe_local, probes.radius, moves, axis, normal,
-                        thumb, probe_local[0][palm], reach, open_rad, closed_rad)
+                        thumb, probe_local[0][palm], reach, open_rad, closed_rad, probe_channel, link_channel)
+
+
+def _channels(model, cfg, side, probes, resolved, q0, qadr, open_rad, closed_rad) -> tuple[np.ndarray, np.ndarray]:
+    """(probe_channel, link_channel): which finger channel moves each probe and link (-1: none), found by closing
+    one channel at a time."""
+    data = mujoco.MjData(model)
+
+    def pose(angles):
+        q = q0.copy()
+        q[qadr] = angles
+        apply_joint_couplings(model, q)
+        data.qpos[:] = q
+        mujoco.mj_kinematics(model, data)
+        world = data.xpos[probes.body_ids] + np.einsum("nij,nj->ni", data.xmat[probes.body_ids].reshape(-1, 3, 3),
+                                                       probes.local)
+        return world, link_positions(data, resolved)
+
+    base = pose(open_rad)
+    probe_channel = np.full(len(probes.radius), -1)
+    link_channel = np.full(len(base[1]), -1)
+    for k in np.flatnonzero(closed_rad != open_rad):
+        angles = open_rad.copy()
+        angles[k] = closed_rad[k]
+        moved = pose(angles)
+        probe_channel[np.linalg.norm(moved[0] - base[0], axis=-1) > 1e-6] = k
+        link_channel[np.linalg.norm(moved[1] - base[1], axis=-1) > 1e-6] = k
+    return probe_channel, link_channel
 
 
 def _unit(v: np.ndarray) -> np.ndarray:

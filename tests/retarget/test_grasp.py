@@ -98,13 +98,54 @@ def test_box_lift_grips_opposite_faces_over_the_centre_of_mass(robot):
     axis = left.face.normal
     middle = 0.5 * (left.point + right.point) - com
     across = middle - (middle @ axis) * axis - (middle @ UP) * UP
-    assert np.linalg.norm(across) <= settings.straddle_m + 1e-6  # the grasp axis passes over the centre of mass
-    assert middle @ UP >= -settings.straddle_m - 1e-6
+    assert np.linalg.norm(across) <= settings.beside_m + 1e-6  # the grasp axis passes over the centre of mass
+    assert middle @ UP >= settings.hang_m - 1e-6  # the object hangs below the grasp axis
     for grip in grips.values():
         palm = grip.rotation @ geometries[grip.side].palm_normal
         assert palm @ grip.face.normal < -0.99  # palm into its face
         assert np.allclose(grip.into, -grip.face.normal)
         check_grip_touches(geometries, grip, planes)
+        check_every_finger_reaches_for_the_face(geometries[grip.side], grip, planes, settings)
+
+
+def test_a_low_grip_moves_up_so_the_object_hangs_below_the_grasp_axis(robot):
+    """Hands below the centre of mass would balance the box on the grasp axis: the axis moves up to hang_m above
+    it, and beside it by at most beside_m."""
+    _, _, geometries = robot
+    pieces = [box((0, 0, 0.2), (0.4, 0.4, 0.4))]
+    faces, planes, com = object_faces(pieces), HullPlanes.from_pieces(pieces), np.array([0.0, 0.0, 0.2])
+    hands = {side: hand_links(geometries[side], np.array([0.08, y, 0.1]), np.array([0.0, 0.0, -1.0]),
+                              np.array([0.0, -np.sign(y), 0.0])) for side, y in (("left", 0.2), ("right", -0.2))}
+    settings = GraspSettings()
+    grips = episode_grips(episode(geometries, hands, lifted=True), faces, planes, com, geometries, settings)
+    assert {g.kind for g in grips} == {"claw"} and len(grips) == 2
+    middle = 0.5 * (grips[0].point + grips[1].point) - com
+    assert middle @ UP == pytest.approx(settings.hang_m, abs=1e-6)
+    assert np.linalg.norm(middle - (middle @ UP) * UP - (middle @ grips[0].face.normal) * grips[0].face.normal) \
+        <= settings.beside_m + 1e-6
+
+
+def check_every_finger_reaches_for_the_face(geometry, grip, planes, settings):
+    """The longest finger's pad lies the claw's gap off the face and every other finger closes on its own until
+    its pad is as near the face as it gets (one closure for all left only the middle finger's pad near it: the
+    pads then sit on one line and the object pivots about it)."""
+    fingers = np.unique(geometry.probe_channel[geometry.probe_channel >= 0])
+    assert len(fingers) == 4
+
+    def gaps(closure):
+        world = geometry.at(closure)[1] @ grip.rotation.T + grip.wrist
+        gap = planes.signed_distance(world)[0] - geometry.probe_radius
+        return np.array([gap[geometry.probe_channel == k].min() for k in fingers])
+
+    own, shared = gaps(grip.closure), gaps(settings.closure)
+    assert own.min() == pytest.approx(settings.palm_gap_m, abs=1e-3)
+    assert (own <= shared + 1e-6).all()
+    assert (own < shared - 2e-4).sum() >= 2  # the shorter fingers moved nearer
+    for k, channel in enumerate(fingers):  # and none could get nearer at another closure up to max_closure
+        for c in np.linspace(settings.closure, settings.max_closure, 13):
+            closure = grip.closure.copy()
+            closure[channel] = c
+            assert gaps(closure)[k] >= own[k] - 1e-3
 
 
 def test_table_drag_hooks_the_fingers_under_the_near_edge(robot, table_object):
