@@ -104,13 +104,12 @@ def checkpoint_eval(substeps: int, checkpoint: str, episodes: int) -> dict:
     from robot_hoi.rl.checkpoint import load_policy
     from robot_hoi.rl.evaluation import evaluate, evaluation_settings
     from robot_hoi.tasks.interaction import factory
-    from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg
-    from robot_hoi.utils.config import load_dataclass
+    from robot_hoi.tasks.interaction.env_cfg import saved_env_cfg
 
     checkpoint = Path(checkpoint)
     model, _, _ = load_policy(checkpoint)
     task = factory.read_task(checkpoint)
-    env_cfg = load_dataclass(InteractionEnvCfg, task["env"], f"{checkpoint} task")
+    env_cfg = saved_env_cfg(task["env"], f"{checkpoint} task")
     evaluation_settings(env_cfg, episodes, 0)
     env_cfg.backend = "cpu"
     embodiment = load_embodiment(env_cfg.embodiment, [f"decimation={substeps}"])

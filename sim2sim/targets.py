@@ -40,11 +40,11 @@ def task_config(contract=None):
     """The interaction task config the policy was trained with: the one its metadata records (contract.task), else
     (files exported before it was recorded) configs/tasks/interaction.yaml."""
     from robot_hoi.paths import TASK_CONFIG
-    from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg
-    from robot_hoi.utils.config import load_dataclass, load_yaml_dataclass
+    from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg, saved_env_cfg
+    from robot_hoi.utils.config import load_yaml_dataclass
 
     if contract is not None and contract.task is not None:
-        return load_dataclass(InteractionEnvCfg, contract.task["env"], f"{contract.source} metadata 'task'")
+        return saved_env_cfg(contract.task["env"], f"{contract.source} metadata 'task'")
     return load_yaml_dataclass(InteractionEnvCfg, TASK_CONFIG)
 
 

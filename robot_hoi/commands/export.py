@@ -57,9 +57,8 @@ def run_onnx(args: argparse.Namespace) -> int:
     from robot_hoi.export.onnx_export import export_policy
     from robot_hoi.rl.checkpoint import load_policy, resolve_checkpoint
     from robot_hoi.tasks.interaction import factory
-    from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg
+    from robot_hoi.tasks.interaction.env_cfg import saved_env_cfg
     from robot_hoi.tasks.interaction.mdp.observations import teacher_observation_spec
-    from robot_hoi.utils.config import load_dataclass
 
     if not args.checkpoint:
         _no_checkpoint_named()
@@ -73,7 +72,7 @@ def run_onnx(args: argparse.Namespace) -> int:
     model, train_cfg, _ = load_policy(ckpt)
     task = factory.read_task(ckpt)
     embodiment = load_embodiment(task["embodiment"])
-    env_cfg = load_dataclass(InteractionEnvCfg, task["env"], f"{ckpt} task")
+    env_cfg = saved_env_cfg(task["env"], f"{ckpt} task")
     env_cfg.num_envs = 16
     clips = [factory.load_source(s, clip_options(args, task.get("clip_options"))) for s in task["sources"]]
     env = factory.make_env(clips, env_cfg, embodiment, cache=ckpt.parent / "references")

@@ -68,8 +68,7 @@ def _checkpoint_policy(args):
     from robot_hoi.rl.checkpoint import load_policy, resolve_checkpoint
     from robot_hoi.student.checkpoint import is_student_checkpoint
     from robot_hoi.tasks.interaction import factory
-    from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg
-    from robot_hoi.utils.config import load_dataclass
+    from robot_hoi.tasks.interaction.env_cfg import saved_env_cfg
 
     ckpt = resolve_checkpoint(args.policy)
     if is_student_checkpoint(ckpt):
@@ -77,7 +76,7 @@ def _checkpoint_policy(args):
                         "-o student.onnx, then robot-hoi play student.onnx")
     model, _, _ = load_policy(ckpt)
     task = factory.read_task(ckpt)
-    env_cfg = load_dataclass(InteractionEnvCfg, task["env"], f"{ckpt} task")
+    env_cfg = saved_env_cfg(task["env"], f"{ckpt} task")
     env = _env_for(args.clip or task["sources"][0], env_cfg, load_embodiment(task["embodiment"]), args,
                    task.get("clip_options"), cache=ckpt.parent / "references")
     if env.obs_dims["policy"] != model.num_actor_obs:

@@ -5,9 +5,11 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from dataclasses import fields
 from pathlib import Path
 
 from robot_hoi.data.cli_options import add_clip_options, clip_options
+from robot_hoi.tasks.interaction.env_cfg import RetargetCfg
 
 
 def register(subparsers) -> None:
@@ -31,36 +33,12 @@ def register(subparsers) -> None:
     p.add_argument("--pretty", action="store_true", help="video with Unitree meshes and shadows (slow on CPU GL)")
     p.add_argument("--video-stride", type=int, default=1, help="render every Nth frame (default 1)")
     p.add_argument("--scale", type=float, help="human->robot scale (default robot_height / subject height)")
-    p.add_argument("--anchor-mode", choices=("distance", "contact"), default="distance",
-                   help="anchor weights from the distance to the object (default) or from the clip's contact labels")
-    p.add_argument("--leg-loads", action="store_true",
-                   help="offset the leg PD targets by the torques that carry the body on the feet in contact "
-                        "(a crouch holds its pose; walking replays sag ~3x less but do not last longer); training "
-                        "uses it with --set env.retarget_leg_loads=true")
-    p.add_argument("--dynamics", action="store_true",
-                   help="offset the PD targets by the torques that drive the motion and cancel the servos' damping "
-                        "(inverse dynamics along the reference); training: --set env.retarget_dynamics=true")
-    p.add_argument("--finger-closure", type=float,
-                   help="fraction of the fingers' stroke closed while a hand holds (default 0.6; 0: flat hands that "
-                        "still squeeze); training: --set env.retarget_finger_closure=F")
-    p.add_argument("--squeeze-toward", choices=("other_hand", "surface"), default=None,
-                   help="where a holding hand's PD targets squeeze: toward the other hand (default; a two-hand grip) "
-                        "or into the object's nearest face (a push); training: "
-                        "--set env.retarget_squeeze_toward=surface")
-    p.add_argument("--squeeze-depth", type=float, default=None, metavar="M",
-                   help="how far past the surface a holding hand's PD targets squeeze (default 0.06 m); training: "
-                        "--set env.retarget_squeeze_depth=M")
-    p.add_argument("--fingertip-underside-reach", type=float, default=None, metavar="M",
-                   help="fingertip targets at most M under an underside of the object (a tabletop) move up onto it "
-                        "(0.15 reaches them; default 0: off); training: --set env.retarget_fingertip_underside_reach=M")
     add_clip_options(p, "--objects-dir")  # --objects-dir: the old spelling, kept working
-    p.add_argument("--object-collision", choices=("hull", "decomposed"), default=None,
-                   help="what the object collides as: its convex hull or its convex pieces (CoACD; a hand reaches "
-                        "under a table's top); the IK keeps the hands out of it (default: the task's "
-                        "env.object_collision, configs/tasks/interaction.yaml)")
-    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="env.KEY=VALUE",
-                   help="a task setting (configs/tasks/interaction.yaml), as for training, e.g. --set "
-                        "env.retarget_solver=qp; the retarget and the physics gate both use it (repeatable)")
+    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="retarget.KEY=VALUE",
+                   help="a retarget setting, as for training: the retarget: block of configs/tasks/interaction.yaml "
+                        f"({', '.join(f.name for f in fields(RetargetCfg))}), e.g. --set retarget.solver=qp; or "
+                        "another task setting, e.g. --set env.object_collision=hull; the retarget and the physics "
+                        "gate both use them (repeatable)")
     p.add_argument("--json", action="store_true", help="print the report as JSON on stdout")
     p.set_defaults(func=run)
 
@@ -89,18 +67,19 @@ def run(args: argparse.Namespace) -> int:
 
     from robot_hoi.embodiment import build_model, load_embodiment
     from robot_hoi.paths import TASK_CONFIG
-    from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg
+    from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg, split_overrides
+    from robot_hoi.tasks.interaction.factory import retarget_options
     from robot_hoi.utils.config import apply_overrides, load_yaml_dataclass
 
     cfg = load_embodiment(args.embodiment)
     model = build_model(cfg)
-    bad = [o for o in args.overrides if not o.startswith("env.")]
-    if bad:
-        raise UserError(f"--set {bad[0]}: retarget takes task settings only, spelled env.KEY=VALUE")
+    settings, others = split_overrides(args.overrides)
+    if others:
+        raise UserError(f"--set {others[0]}: retarget takes task settings only, spelled retarget.KEY=VALUE or "
+                        "env.KEY=VALUE")
     task = load_yaml_dataclass(InteractionEnvCfg, TASK_CONFIG)  # the task's settings
-    task = apply_overrides(task, [o[len("env."):] for o in args.overrides], "--set")
-    task.object_collision = args.object_collision or task.object_collision  # the gate collides with it too
-    options = _options(args, task)
+    task = apply_overrides(task, settings, "--set")
+    options = retarget_options(task)
     if folder:
         return _run_folder(args, cfg, model, task, options)
     clip = _load(args, args.clip or None)
@@ -128,37 +107,6 @@ def run(args: argparse.Namespace) -> int:
             print(f"wrote {args.video} (rendered with {report['video']['renderer']})")
         print(f"physics gate: {format_verdict(report['feasibility']['gate'])}")
     return 0
-
-
-def _options(args: argparse.Namespace, task):
-    """RetargetOptions: the task's retarget settings, then the flags."""
-    from dataclasses import replace
-
-    from robot_hoi.errors import UserError
-    from robot_hoi.retarget.executable import check_squeeze_depth
-    from robot_hoi.retarget.hands import check_closure
-    from robot_hoi.tasks.interaction.factory import retarget_options
-
-    options = retarget_options(task)
-    options = replace(options, mapping=replace(options.mapping, anchor_mode=args.anchor_mode))
-    if args.leg_loads:
-        options = replace(options, executable=replace(options.executable, compensate_leg_loads=True))
-    if args.dynamics:
-        options = replace(options, executable=replace(options.executable, compensate_dynamics=True))
-    if args.squeeze_toward is not None:
-        options = replace(options, executable=replace(options.executable, squeeze_toward=args.squeeze_toward))
-    if args.squeeze_depth is not None:
-        depth = check_squeeze_depth(args.squeeze_depth, "--squeeze-depth")
-        options = replace(options, executable=replace(options.executable, squeeze_depth=depth))
-    if args.fingertip_underside_reach is not None:
-        if args.fingertip_underside_reach < 0:
-            raise UserError(f"--fingertip-underside-reach must be >= 0 m, got {args.fingertip_underside_reach}")
-        options = replace(options, mapping=replace(options.mapping,
-                                                   fingertip_underside_reach=args.fingertip_underside_reach))
-    if args.finger_closure is not None:
-        closure = check_closure(args.finger_closure, "--finger-closure")
-        options = replace(options, grasp=replace(options.grasp, closure=closure))
-    return options
 
 
 def _retarget_and_gate(clip, cfg, model, task, options, scale=None):

@@ -55,7 +55,8 @@ def register(subparsers) -> None:
                    help=f"reward formulation: a configs/tasks/rewards/ name ({', '.join(reward_set_names())}) "
                         "or YAML path; default: the recipe's, else the task config's")
     p.add_argument("--set", dest="overrides", action="append", default=[],
-                   help="override, e.g. --set env.num_envs=128 --set ppo.actor_lr=1e-4 (repeatable)")
+                   help="override, e.g. --set env.num_envs=128 --set retarget.solver=qp --set ppo.actor_lr=1e-4 "
+                        "(repeatable; env.KEY and retarget.KEY: the task config, configs/tasks/interaction.yaml)")
     p.add_argument("--resume", action="store_true", help="continue each group from its latest checkpoint")
     p.add_argument("--skip-gate", action="store_true", default=None,
                    help="train on references that fail the physics gate (robot-hoi retarget: the reference replayed "
@@ -150,20 +151,19 @@ def run(args: argparse.Namespace) -> int:
     from robot_hoi.rl.config import load_train_config
     from robot_hoi.rl.teacher_job import PREEMPT_HOOK_ENV, TeacherJob, format_line, print_summary
     from robot_hoi.tasks.interaction import factory
-    from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg, apply_reward_set
+    from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg, apply_reward_set, split_overrides
     from robot_hoi.utils.config import apply_overrides, load_yaml_dataclass
 
     if args.eval_episodes < 1:
         raise UserError(f"--eval-episodes must be at least 1, got {args.eval_episodes}")
     torch.set_num_threads(max(args.torch_threads, 1))
-    env_overrides = [o[len("env."):] for o in args.overrides if o.startswith("env.")]
-    train_overrides = [o for o in args.overrides if not o.startswith("env.")]
+    env_overrides, train_overrides = split_overrides(args.overrides)
     embodiment = load_embodiment(args.embodiment)
     env_cfg = load_yaml_dataclass(InteractionEnvCfg, args.task_config)
     if args.rewards:
         apply_reward_set(env_cfg, args.rewards)
     if recipe is not None:
-        env_cfg = recipe.apply("env", env_cfg)
+        env_cfg = recipe.apply("retarget", recipe.apply("env", env_cfg))
     env_cfg = apply_overrides(env_cfg, env_overrides, "--set")
     env_cfg.embodiment = embodiment.name
     train_cfg = load_train_config(args.config or PRESETS[args.preset])

@@ -29,9 +29,8 @@ def run_student_export(args: argparse.Namespace, ckpt: Path) -> int:
     from robot_hoi.student.checkpoint import load_student
     from robot_hoi.student.reference_distill import LIMIT_MARGIN
     from robot_hoi.student.task import read_student_task, task_folder
-    from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg
+    from robot_hoi.tasks.interaction.env_cfg import saved_env_cfg
     from robot_hoi.tasks.interaction.mdp.observations import student_observation_spec
-    from robot_hoi.utils.config import load_dataclass
 
     model, cfg, data = load_student(ckpt)
     if model.layout.obs_dim != data["dims"]["actor_obs"] or cfg.runner.actor_obs_groups != ["student"]:
@@ -41,7 +40,7 @@ def run_student_export(args: argparse.Namespace, ckpt: Path) -> int:
                         "(= --set skillmimic.history=false)")
     task = read_student_task(ckpt)
     folder = task_folder(ckpt)
-    env_cfg = load_dataclass(InteractionEnvCfg, task["env"], f"{folder}/task.json")
+    env_cfg = saved_env_cfg(task["env"], f"{folder}/task.json")
     env_cfg.num_envs = 16
     env_cfg.psi.enabled = False
     from robot_hoi.student.task import build_task_env

@@ -44,7 +44,7 @@ class ExecutableSettings:
     # then holds its pose (pelvis sag 9 cm -> 0.04 cm; test) and the walk replays (zero residual, pelvis held by
     # the assist) sag 14-18 cm instead of 47-49, but do not last longer (embedded:walk:0 57 vs 60 frames, walk:3
     # 58 vs 75: the swing foot lands short and the pelvis drifts sideways), and lift_place's replay ends earlier
-    # (73 vs 86 frames). Off until a walking policy is trained with it; `robot-hoi retarget --leg-loads`.
+    # (73 vs 86 frames). Off until a walking policy is trained with it; `--set retarget.leg_loads=true`.
     compensate_leg_loads: bool = False
     # ... and for the motion too: tau = M(q) qdd + C(q, qd) + g(q) along the reference (finite differences) plus the
     # servos' damping kv qd, the held object's weight as m (g + its vertical acceleration). Off: static loads only

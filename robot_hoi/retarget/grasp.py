@@ -3,7 +3,7 @@
 OMOMO hands are flat and often sit inside the object; a human pinches a tabletop's edge with the fingers under
 it, or pushes a box with a palm on its top. Placing the robot hand where the human's was leaves the Inspire
 fingers in the air or the two hands on adjacent faces of a box. With the planner on (`GraspSettings.enabled`,
-the task's `env.retarget_grasp`), each grip episode (a run of frames where some hand must touch the object,
+the task's `retarget.grasp`), each grip episode (a run of frames where some hand must touch the object,
 data.contacts.hand_contact_need) gets contacts chosen on the sides of the convex pieces the simulation collides
 with (faces.py), by what the object does while held:
 

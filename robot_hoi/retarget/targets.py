@@ -67,6 +67,9 @@ def link_group(human_name: str) -> str:
     raise DataError(f"no link group for human body '{human_name}'")
 
 
+ANCHOR_MODES = ("distance", "contact")
+
+
 def hand_side(human_name: str) -> str | None:
     """'left' / 'right' for bodies of a hand (wrist and fingers), else None."""
     if link_group(human_name) not in ("wrists", "fingers"):
@@ -113,7 +116,7 @@ class TargetMapping:
     )  # fmt: skip
 
     def __post_init__(self) -> None:
-        if self.anchor_mode not in ("distance", "contact"):
+        if self.anchor_mode not in ANCHOR_MODES:
             raise DataError(f"anchor_mode must be 'distance' or 'contact', not '{self.anchor_mode}'")
         if self.anchor_radius <= 0:
             raise DataError(f"anchor_radius must be > 0, got {self.anchor_radius}")

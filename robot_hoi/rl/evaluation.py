@@ -101,10 +101,12 @@ def evaluation_settings(env_cfg, episodes: int, seed: int, protocol: EvalProtoco
 
 
 def apply_env_overrides(env_cfg, overrides: list[str]):
-    """`--set` values for the environment: "env.key=value" or "key=value" (InteractionEnvCfg keys)."""
+    """`--set` values for the environment: "env.key=value" or "key=value" (InteractionEnvCfg keys), and
+    "retarget.key=value" (its retarget: block)."""
+    from robot_hoi.tasks.interaction.env_cfg import split_overrides
     from robot_hoi.utils.config import apply_overrides
 
-    items = [o[len("env."):] if o.startswith("env.") else o for o in overrides]
+    items, _ = split_overrides(overrides, bare=True)
     return apply_overrides(env_cfg, items, "--set") if items else env_cfg
 
 

@@ -67,15 +67,15 @@ def _evaluate_teacher(request: EvalRequest, protocol: EvalProtocol, ckpt: Path |
     from robot_hoi.rl.models import ActorCritic
     from robot_hoi.sim.device import resolve_env_cfg
     from robot_hoi.tasks.interaction import factory
-    from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg
-    from robot_hoi.utils.config import load_dataclass, load_yaml_dataclass
+    from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg, saved_env_cfg
+    from robot_hoi.utils.config import load_yaml_dataclass
 
     model = None
     task = None
     if ckpt is not None:
         model, _, _ = load_policy(ckpt)
         task = factory.read_task(ckpt) if request.data is None else None
-    env_cfg = load_dataclass(InteractionEnvCfg, task["env"], f"{ckpt} task") if task else \
+    env_cfg = saved_env_cfg(task["env"], f"{ckpt} task") if task else \
         load_yaml_dataclass(InteractionEnvCfg, TASK_CONFIG)
     sources = task["sources"] if task else factory.expand_sources(request.data)
     options = {**(task.get("clip_options") or {}), **(request.clip_options or {})} if task else \

@@ -11,6 +11,7 @@ A recipe holds only what differs from the defaults, or from the recipe its `base
     rewards:  a reward set (configs/tasks/rewards/), as --rewards
     skip_gate: true to train although the reference fails the physics gate, as --skip-gate (say why beside it)
     env:      task settings, nested as in configs/tasks/interaction.yaml (what --set env.KEY=VALUE sets)
+    retarget: the task's retarget settings, as its retarget: block (what --set retarget.KEY=VALUE sets)
     train:    training settings, nested as in configs/train/ppo_fast.yaml: seed, model, ppo, runner (--set KEY=VALUE)
 
 A recipe's values override its base's (mappings key by key); the command line's flags and --set override the
@@ -29,12 +30,13 @@ import yaml
 from deploy.atomic import atomic_write_text
 from robot_hoi.errors import UserError
 from robot_hoi.paths import CONFIGS_DIR
+from robot_hoi.tasks.interaction.env_cfg import LEGACY_RETARGET_KEYS
 from robot_hoi.utils.config import apply_changes, merge_dicts, parse_override, read_yaml_chain
 
 RECIPES_DIR = CONFIGS_DIR / "recipes"
 RECORD_FILE = "recipe.yaml"
 FLAGS = ("data", "group", "budget", "init", "preset", "rewards", "skip_gate")  # the keys that stand for train's flags
-SECTIONS = ("env", "train")  # the keys that change a config
+SECTIONS = ("env", "retarget", "train")  # the keys that change a config
 GROUPS = ("subject", "object", "clip")
 
 T = TypeVar("T")
@@ -54,11 +56,15 @@ class Recipe:
         return merged
 
     def apply(self, section: str, cfg: T) -> T:
-        """`cfg` (the task config for "env", the training config for "train") with each file's changes merged in,
-        base first, so an unknown key or a wrong value is reported with the file that holds it."""
+        """`cfg` (the task config for "env" and "retarget", its retarget: block, the training config for "train")
+        with each file's changes merged in, base first, so an unknown key or a wrong value is reported with the file
+        that holds it."""
         for path, layer in self.layers:
             if layer.get(section):
-                cfg = apply_changes(cfg, layer[section], str(path), prefix=(section,))
+                if section == "retarget":
+                    cfg = apply_changes(cfg, {"retarget": layer[section]}, str(path))
+                else:
+                    cfg = apply_changes(cfg, layer[section], str(path), prefix=(section,))
         return cfg
 
 
@@ -88,20 +94,27 @@ def _check_layer(path: Path, layer: dict) -> None:
     for section in SECTIONS:
         if section in layer and not isinstance(layer[section], dict | None):
             raise UserError(f"{path}: {section}: expected a mapping of settings, got {layer[section]!r}")
-    if "reward_set" in (layer.get("env") or {}):
+    env = layer.get("env") or {}
+    if "reward_set" in env:
         raise UserError(f"{path}: env.reward_set: a recipe names its reward set as rewards: NAME")
+    if "retarget" in env:
+        raise UserError(f"{path}: env.retarget: a recipe's retarget settings are a section of their own, retarget:")
+    for key in env:
+        if key in LEGACY_RETARGET_KEYS:
+            raise UserError(f"{path}: env.{key}: the retarget settings are a recipe section of their own: spell it "
+                            f"retarget: {{{LEGACY_RETARGET_KEYS[key]}: ...}}")
 
 
 def resolved(recipe: Recipe | None, flags: dict[str, Any], overrides: list[str]) -> dict:
     """The recipe as a run uses it: `recipe`'s files merged, `flags` (train's flags by recipe key; None: not given)
-    and the --set `overrides` (env.KEY=VALUE into env, others into train) on top."""
+    and the --set `overrides` (env.KEY=VALUE into env, retarget.KEY=VALUE into retarget, others into train) on top."""
     out = recipe.settings if recipe is not None else {}
     out = merge_dicts(out, {k: v for k, v in flags.items() if v is not None})
     for item in overrides:
         parts, value = parse_override(item)
         section = "train"
-        if parts[0] == "env":
-            section, parts = "env", parts[1:]
+        if parts[0] in ("env", "retarget"):
+            section, parts = parts[0], parts[1:]
         for part in reversed(parts):
             value = {part: value}
         out = merge_dicts(out, {section: value})

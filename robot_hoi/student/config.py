@@ -19,6 +19,7 @@ import yaml
 from robot_hoi.errors import UserError
 from robot_hoi.paths import CONFIGS_DIR
 from robot_hoi.rl.config import TrainConfig
+from robot_hoi.tasks.interaction.env_cfg import split_overrides
 from robot_hoi.utils.config import apply_overrides, load_yaml_dataclass
 
 STUDENT_CONFIG = CONFIGS_DIR / "train" / "student.yaml"
@@ -254,17 +255,12 @@ def _flatten(data: dict, prefix: str = "") -> list[tuple[str, Any]]:
 
 def load_student_config(path: str | Path = STUDENT_FAST_CONFIG, options: list[str] | None = None,
                         overrides: list[str] | None = None) -> tuple[StudentTrainConfig, list[str]]:
-    """The config from `path`, then each option, then `overrides`. Returns it with the option's env overrides
-    (keys starting with "env."), which belong to the environment config."""
-    train: list[str] = []
-    env: list[str] = []
-    for name in options or []:
-        for item in option_overrides(name):
-            (env if item.startswith("env.") else train).append(item)
-    for item in overrides or []:
-        (env if item.startswith("env.") else train).append(item)
+    """The config from `path`, then each option, then `overrides`. Returns it with the environment's overrides
+    (keys starting with "env." or "retarget.", tasks.interaction.env_cfg.split_overrides), which belong to the
+    environment config."""
+    items = [item for name in options or [] for item in option_overrides(name)] + list(overrides or [])
+    env, train = split_overrides(items)
     cfg = apply_overrides(load_yaml_dataclass(StudentTrainConfig, path), train, source=str(path))
     if cfg.num_envs is not None and cfg.num_envs <= 0:
         raise UserError(f"{path}: num_envs must be positive or null, not {cfg.num_envs}")
-    env = [e[len("env."):] for e in env]
     return cfg, ([f"num_envs={cfg.num_envs}"] if cfg.num_envs is not None else []) + env

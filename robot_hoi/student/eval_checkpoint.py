@@ -54,9 +54,8 @@ def evaluate_student(checkpoint: str | Path, data: list[str] | None = None, epis
     )
     from robot_hoi.tasks.interaction import factory
     from robot_hoi.tasks.interaction.env import InteractionEnv
-    from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg
+    from robot_hoi.tasks.interaction.env_cfg import saved_env_cfg
     from robot_hoi.tasks.interaction.mdp.observations import student_observation_spec
-    from robot_hoi.utils.config import load_dataclass
 
     if episodes < 1:
         raise UserError(f"--episodes must be at least 1, got {episodes}")
@@ -64,7 +63,7 @@ def evaluate_student(checkpoint: str | Path, data: list[str] | None = None, epis
     model, cfg, stored = load_student(checkpoint)
     task = read_student_task(checkpoint)
     folder = task_folder(checkpoint)
-    env_cfg = evaluation_cfg(load_dataclass(InteractionEnvCfg, task["env"], f"{folder}/task.json"), episodes, seed,
+    env_cfg = evaluation_cfg(saved_env_cfg(task["env"], f"{folder}/task.json"), episodes, seed,
                              protocol)
     env_cfg = apply_env_overrides(env_cfg, overrides or [])  # after: `--set` may evaluate under other settings
     groups = list(cfg.runner.actor_obs_groups)

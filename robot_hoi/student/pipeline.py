@@ -47,8 +47,8 @@ from robot_hoi.student.task import (
 )
 from robot_hoi.student.teachers import CompositeTeacher, TeacherMember, TeacherRun, load_teacher_runs
 from robot_hoi.tasks.interaction import factory
-from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg
-from robot_hoi.utils.config import apply_overrides, load_dataclass
+from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg, saved_env_cfg
+from robot_hoi.utils.config import apply_overrides
 
 
 @dataclass
@@ -90,10 +90,10 @@ def prepare(args: argparse.Namespace) -> Setup:
     config_path = args.config or PRESETS[args.preset or DEFAULT_PRESET]  # None: no --preset (nor recipe)
     cfg, env_overrides = load_student_config(config_path, getattr(args, "options", []), args.overrides)
     runs = load_teacher_runs(args.teachers)
-    teacher_env_cfg = load_dataclass(InteractionEnvCfg, runs[0].env, f"{runs[0].checkpoint.parent}/task.json")
+    teacher_env_cfg = saved_env_cfg(runs[0].env, f"{runs[0].checkpoint.parent}/task.json")
     teacher_env_cfg = apply_overrides(teacher_env_cfg, [o for o in env_overrides if o.startswith("num_envs=")
                                                         or o.startswith("nthread=")], "--set env.*")
-    env_cfg = student_env_cfg(apply_overrides(load_dataclass(InteractionEnvCfg, runs[0].env, "teacher task"),
+    env_cfg = student_env_cfg(apply_overrides(saved_env_cfg(runs[0].env, "teacher task"),
                                               env_overrides, "--set env.*"))
     if cfg.complexmimic.enabled:
         env_cfg.terminations.max_mean_link_error = cfg.complexmimic.student_tau

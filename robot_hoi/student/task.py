@@ -12,9 +12,8 @@ from pathlib import Path
 from deploy.atomic import atomic_write_text
 from robot_hoi.errors import UserError
 from robot_hoi.tasks.interaction import factory
-from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg
+from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg, saved_env_cfg
 from robot_hoi.tasks.interaction.mdp.observations import DEFAULT_STUDENT_TERMS
-from robot_hoi.utils.config import load_dataclass
 
 TASK_FILE = factory.TASK_FILE
 STUDENT_GROUP = "student"
@@ -120,7 +119,7 @@ def build_task_env(task: dict, folder: Path, env_cfg: InteractionEnvCfg | None =
     """(InteractionEnv, clips, sources) of a student task on its `reference`s (see task_references)."""
     from robot_hoi.tasks.interaction.env import InteractionEnv
 
-    cfg = env_cfg or load_dataclass(InteractionEnvCfg, task["env"], f"{folder / TASK_FILE}")
+    cfg = env_cfg or saved_env_cfg(task["env"], f"{folder / TASK_FILE}")
     embodiment, clips, sources, references = task_references(task, folder, cfg, reference)
     env = InteractionEnv(cfg, make_scene(clips[0], embodiment, cfg), references)
     return env, clips, sources

@@ -221,6 +221,10 @@ def _convert_dataclass(cls: type, value: Any, source: str, key: str) -> Any:
     unknown = sorted(set(value) - set(fields))
     if unknown:
         prefix = f"{key}." if key else ""
+        moved = getattr(cls, "MOVED_KEYS", {})  # a dataclass's old spellings of keys: old -> its spelling now
+        for name in unknown:
+            if name in moved:
+                raise UserError(f"{source}: {prefix}{name} has moved: it is spelled {moved[name]} now")
         raise UserError(
             f"{source}: unknown key(s) {', '.join(prefix + str(u) for u in unknown)} "
             f"(known: {', '.join(sorted(fields))})"

@@ -81,3 +81,21 @@ def test_a_folder_of_clips_prints_one_feasibility_table(tmp_path, capsys):
 def test_a_folder_with_a_video_or_a_file_output_is_refused(tmp_path, capsys):
     assert main(["retarget", str(tmp_path), "-o", str(tmp_path / "m.npz")]) == 2
     assert "names a folder" in capsys.readouterr().err
+
+
+def test_each_retarget_setting_has_one_spelling(capsys):
+    """The retarget settings are the task config's retarget: block, --set retarget.KEY=VALUE as for training (the
+    help names every key), not flags of their own as well."""
+    from dataclasses import fields
+
+    from robot_hoi.tasks.interaction.env_cfg import RetargetCfg
+
+    with pytest.raises(SystemExit):
+        main(["retarget", "--help"])
+    text = capsys.readouterr().out
+    assert "--set retarget.KEY=VALUE" in text
+    for key in (f.name for f in fields(RetargetCfg)):
+        assert key in " ".join(text.split())
+    for old in ("--leg-loads", "--dynamics", "--finger-closure", "--squeeze-toward", "--squeeze-depth",
+                "--fingertip-underside-reach", "--anchor-mode", "--object-collision"):
+        assert old not in text

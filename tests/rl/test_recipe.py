@@ -35,7 +35,7 @@ def _configs(recipe):
     if settings.get("rewards"):
         apply_reward_set(env, settings["rewards"])
     preset = DEFAULT_PPO_CONFIG if settings.get("preset") == "paper" else FAST_PPO_CONFIG
-    return recipe.apply("env", env), recipe.apply("train", load_train_config(preset))
+    return recipe.apply("retarget", recipe.apply("env", env)), recipe.apply("train", load_train_config(preset))
 
 
 def test_every_shipped_recipe_loads_and_applies():
@@ -46,7 +46,8 @@ def test_every_shipped_recipe_loads_and_applies():
         _configs(load_recipe(name))
     table_env, _ = _configs(load_recipe("table_drag"))
     assert table_env.init.failure_weighted  # from its base
-    assert (table_env.retarget_squeeze_depth, table_env.assist.anneal_samples) == (0.12, 0.6e6)
+    assert (table_env.retarget.squeeze_depth, table_env.retarget.squeeze_toward, table_env.assist.anneal_samples) == \
+        (0.12, "surface", 0.6e6)
     assert table_env.rewards["object_pos"].weight == 156.0  # anchor_additive_tight
     assert table_env.assist.initial_level == 1.0  # untouched settings keep the task config's
 
@@ -90,6 +91,23 @@ def test_unknown_keys_are_refused_naming_the_file_and_the_key(tmp_path):
         load_recipe(str(_write(tmp_path, "g", {"group": "team"})))
     with pytest.raises(UserError, match=r"s\.yaml: skip_gate: expected true or false, got 'yes please'"):
         load_recipe(str(_write(tmp_path, "s", {"skip_gate": "yes please"})))
+    with pytest.raises(UserError, match=r"r\.yaml: unknown key 'retarget\.squeeze_dept'"):
+        _configs(load_recipe(str(_write(tmp_path, "r", {"retarget": {"squeeze_dept": 0.1}}))))
+
+
+def test_retarget_settings_are_a_section_of_their_own(tmp_path):
+    """A recipe's retarget: section sets the task config's retarget: block (as --set retarget.KEY=VALUE); the
+    settings under env:, flat or nested, are refused with the spelling to use."""
+    _write(tmp_path, "base", {"retarget": {"squeeze_depth": 0.1, "solver": "qp"}})
+    leaf = _write(tmp_path, "leaf", {"base": "base.yaml", "retarget": {"squeeze_depth": 0.2}})
+    env, _ = _configs(load_recipe(str(leaf)))
+    assert (env.retarget.squeeze_depth, env.retarget.solver) == (0.2, "qp")
+    with pytest.raises(UserError, match=r"flat\.yaml: env\.retarget_squeeze_depth: .* retarget: \{squeeze_depth: "):
+        load_recipe(str(_write(tmp_path, "flat", {"env": {"retarget_squeeze_depth": 0.1}})))
+    with pytest.raises(UserError, match=r"nested\.yaml: env\.retarget: .* a section of their own, retarget:"):
+        load_recipe(str(_write(tmp_path, "nested", {"env": {"retarget": {"squeeze_depth": 0.1}}})))
+    with pytest.raises(UserError, match=r"retarget\.squeeze_depth must be within"):
+        _configs(load_recipe(str(_write(tmp_path, "far", {"retarget": {"squeeze_depth": 1.0}}))))
 
 
 def test_a_recipe_can_train_past_the_gate_and_the_command_line_still_decides(tmp_path):
@@ -128,23 +146,26 @@ def test_command_line_overrides_the_recipe_and_the_run_records_it(tmp_path, monk
 
     monkeypatch.setattr("robot_hoi.rl.teacher_job.train_teacher_group", capture)
     _write(tmp_path, "base", {"budget": "30m", "env": {"assist": {"anneal_samples": 1.0e6, "initial_level": 0.7}},
+                              "retarget": {"squeeze_depth": 0.1, "solver": "dls"},
                               "train": {"seed": 5, "ppo": {"num_epochs": 3}}})
     leaf = _write(tmp_path, "leaf", {"base": "base.yaml", "rewards": "anchor_additive_tight", "init": "none",
                                      "env": {"assist": {"anneal_samples": 2.0e6}}})
     out = tmp_path / "run"
     with pytest.raises(_Stop):
         main(["train", "--recipe", str(leaf), "--budget", "3it", "--set", "seed=7", "--out", str(out), *TINY,
-              "--set", "env.assist.anneal_samples=123", "--set", "ppo.num_epochs=2"])
+              "--set", "env.assist.anneal_samples=123", "--set", "ppo.num_epochs=2", "--set", "retarget.squeeze_depth=0.06"])
     (job,) = jobs
     env, train = job.env_cfg, job.train_cfg
     assert env.assist.anneal_samples == 123.0  # --set over the recipe over its base
     assert env.assist.initial_level == 0.7  # the base's, untouched by the leaf
+    assert (env.retarget.squeeze_depth, env.retarget.solver) == (0.06, "dls")  # --set over the base's
     assert env.rewards["root_pos"].weight == 44.4  # the recipe's reward set
     assert (train.seed, train.ppo.num_epochs) == (7, 2)  # --set over the base's
     assert job.budget.iterations == 3 and job.init is None  # --budget over 30m; init: none
     record = yaml.safe_load((out / RECORD_FILE).read_text())
     assert record["budget"] == "3it" and record["init"] == "none" and record["rewards"] == "anchor_additive_tight"
     assert record["env"]["assist"] == {"anneal_samples": 123, "initial_level": 0.7}
+    assert record["retarget"] == {"squeeze_depth": 0.06, "solver": "dls"}
     assert record["train"]["seed"] == 7 and "base" not in record
     again = out / "again"
     with pytest.raises(_Stop):

@@ -62,6 +62,15 @@ def test_the_world_is_rebuilt_from_the_task_the_policy_recorded(contract, export
     assert _object_friction(clip_targets(trained, ["embedded:lift_place"], "g1_inspire", True)[0]) == \
         pytest.approx(0.37)
 
+    flat = json.loads(metadata["task"])  # exported before the retarget: block: its settings were flat env keys
+    block = flat["env"].pop("retarget")
+    flat["env"].update({f"retarget_{k}": v for k, v in block.items() if k != "anchor_mode"}, retarget_squeeze_depth=0.12)
+    before_block = task_config(PolicyContract.from_metadata(dict(metadata, task=json.dumps(flat)), str(exported_policy)))
+    recorded = task_config(contract)
+    assert recorded.retarget.squeeze_depth != 0.12
+    assert before_block == dataclasses.replace(recorded, retarget=dataclasses.replace(recorded.retarget,
+                                                                                      squeeze_depth=0.12))
+
     older = {k: v for k, v in metadata.items() if k != "task"}  # exported before the task was recorded
     assert dataclasses.asdict(task_config(PolicyContract.from_metadata(older, str(exported_policy)))) == \
         dataclasses.asdict(yaml_cfg)

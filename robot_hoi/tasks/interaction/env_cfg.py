@@ -9,6 +9,7 @@ set to `null` is disabled.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import ClassVar
 
 from robot_hoi.termination import Thresholds
 
@@ -140,7 +141,85 @@ class RandomizationCfg:
 
 
 @dataclass
+class RetargetCfg:
+    """How the task's references are retargeted: the task config's `retarget:` block, `--set retarget.KEY=VALUE` on
+    every command that retargets (train, retarget, eval). factory.retarget_options maps it onto the retarget's
+    RetargetOptions; None: the retarget's own default. Each is recorded in the cached reference: a cache made with
+    another value is an error, not silently reused."""
+
+    # the IK: "dls" (damped least squares + repairs) | "qp" (constrained QP, retarget/qp.py); None: the retarget's dls
+    solver: str | None = None
+    # hands in held segments: the human's placement (False) or grasps planned for the Inspire hand (True,
+    # retarget/grasp.py: opposing faces, pushes); None: the retarget's default
+    grasp: bool | None = None
+    # the leg PD targets also carry the torques that hold the body on its feet in contact. The root-held,
+    # zero-residual replay of OMOMO sub8_largebox_000 (bend over to push a floor box) then reaches the box (hands
+    # 2-3 cm from it at frame 13, pelvis within 1 cm) instead of hanging 20-25 cm off (pelvis 9.5 cm low); the
+    # shipped base policy was trained without it
+    leg_loads: bool = False
+    # ... and the torques that drive the reference's motion and cancel the servos' damping along it (inverse
+    # dynamics; retarget ExecutableSettings.compensate_dynamics)
+    dynamics: bool = False
+    # fraction of the fingers' open->closed stroke while a hand holds (None: the retarget's GraspRule default, 0.6)
+    finger_closure: float | None = None
+    # where a holding hand's PD targets squeeze: "other_hand" | "surface" (into the nearest face: pushes; retarget
+    # ExecutableSettings.squeeze_toward; None: the retarget's "other_hand")
+    squeeze_toward: str | None = None
+    # m the holding hands' PD targets go past the surface (retarget ExecutableSettings.squeeze_depth; None: the
+    # retarget's 0.06)
+    squeeze_depth: float | None = None
+    # m: fingertip targets this far (at most) under an underside of the object move up onto it (retarget
+    # TargetMapping.fingertip_underside_reach; None: the retarget's 0, off)
+    fingertip_underside_reach: float | None = None
+    # anchor weights (links that follow the object): "distance" (from the distance to the object) | "contact" (the
+    # clip's per-body contact labels where it has them; retarget TargetMapping.anchor_mode); None: the retarget's
+    # "distance"
+    anchor_mode: str | None = None
+
+    def __post_init__(self) -> None:
+        """Each value checked as the user spells its key (the retarget's modules load only for a value given)."""
+        from robot_hoi.errors import UserError
+
+        if self.solver is not None:
+            from robot_hoi.retarget.ik import IK_SOLVERS
+
+            if self.solver not in IK_SOLVERS:
+                raise UserError(f"retarget.solver must be one of {', '.join(IK_SOLVERS)}, got {self.solver!r}")
+        if self.finger_closure is not None:
+            from robot_hoi.retarget.hands import check_closure
+
+            check_closure(self.finger_closure, "retarget.finger_closure")
+        if self.squeeze_toward is not None:
+            from robot_hoi.retarget.executable import check_squeeze_toward
+
+            check_squeeze_toward(self.squeeze_toward, "retarget.squeeze_toward")
+        if self.squeeze_depth is not None:
+            from robot_hoi.retarget.executable import check_squeeze_depth
+
+            check_squeeze_depth(self.squeeze_depth, "retarget.squeeze_depth")
+        if self.fingertip_underside_reach is not None and not self.fingertip_underside_reach >= 0.0:
+            raise UserError(f"retarget.fingertip_underside_reach must be >= 0 m, got {self.fingertip_underside_reach}")
+        if self.anchor_mode is not None:
+            from robot_hoi.retarget.targets import ANCHOR_MODES
+
+            if self.anchor_mode not in ANCHOR_MODES:
+                raise UserError(f"retarget.anchor_mode must be one of {', '.join(ANCHOR_MODES)}, "
+                                f"got {self.anchor_mode!r}")
+
+
+# Runs saved before the retarget: block (task.json, an exported policy's metadata) hold its settings as flat task
+# keys: saved_env_cfg moves them into the block; a config or --set of the user's that spells them so is an error
+# naming the new spelling.
+LEGACY_RETARGET_KEYS = {f"retarget_{name}": name for name in (
+    "leg_loads", "dynamics", "finger_closure", "squeeze_toward", "squeeze_depth", "fingertip_underside_reach",
+    "solver", "grasp")}
+
+
+@dataclass
 class InteractionEnvCfg:
+    # keys that moved (utils.config names their new spelling when a config still holds them)
+    MOVED_KEYS: ClassVar[dict[str, str]] = {old: f"retarget.{new}" for old, new in LEGACY_RETARGET_KEYS.items()}
+
     embodiment: str = "g1_inspire"
     num_envs: int = 256
     backend: str = "auto"
@@ -157,34 +236,10 @@ class InteractionEnvCfg:
                                             # (deploy.contract.warmup_offset) instead of stepping there at once
     max_episode_frames: int = 300           # supp. Table C
     reference_links: str = "ik"             # "ik" (robot-reachable link targets) | "scaled_human" (pure InterMimic)
-    # the retarget's leg PD targets also carry the torques that hold the body on its feet in contact. The root-held,
-    # zero-residual replay of OMOMO sub8_largebox_000 (bend over to push a floor box) then reaches the box (hands
-    # 2-3 cm from it at frame 13, pelvis within 1 cm) instead of hanging 20-25 cm off (pelvis 9.5 cm low); the
-    # shipped base policy was trained without it. Recorded in the cached retarget: a mismatch is an error
-    retarget_leg_loads: bool = False
-    # ... and the torques that drive the reference's motion and cancel the servos' damping along it (inverse
-    # dynamics; retarget ExecutableSettings.compensate_dynamics). Recorded in the cached retarget like leg loads
-    retarget_dynamics: bool = False
-    # fraction of the fingers' open->closed stroke while a hand holds (None: the retarget's GraspRule default, 0.6)
-    retarget_finger_closure: float | None = None
-    # where a holding hand's PD targets squeeze: "other_hand" | "surface" (into the nearest face: pushes; retarget
-    # ExecutableSettings.squeeze_toward; None: the retarget's "other_hand"). Recorded in the cached retarget
-    retarget_squeeze_toward: str | None = None
-    # m the holding hands' PD targets go past the surface (retarget ExecutableSettings.squeeze_depth; None: the
-    # retarget's 0.06). Recorded in the cached retarget
-    retarget_squeeze_depth: float | None = None
-    # m: fingertip targets this far (at most) under an underside of the object move up onto it (retarget
-    # TargetMapping.fingertip_underside_reach; None: the retarget's 0, off). Recorded in the cached retarget
-    retarget_fingertip_underside_reach: float | None = None
-    # the retarget's IK: "dls" (damped least squares + repairs) | "qp" (constrained QP, retarget/qp.py); None: the
-    # retarget's default. Recorded in the cached retarget
-    retarget_solver: str | None = None
-    # hands in held segments: the human's placement (False) or grasps planned for the Inspire hand (True,
-    # retarget/grasp.py: opposing faces, pushes); None: the retarget's default. Recorded in the cached retarget
-    retarget_grasp: bool | None = None
+    retarget: RetargetCfg = field(default_factory=RetargetCfg)  # how the references are retargeted
     # what the object collides as: "hull" (its convex hull; checkpoints without the key) | "decomposed" (its convex
     # pieces, ObjectAsset.convex_parts: a hand reaches under a table's top). The retarget keeps the hands out of
-    # the same shape; recorded in the cached retarget like leg loads
+    # the same shape; recorded in the cached retarget like the retarget: block
     object_collision: str = "hull"
     object_density: float = 25.0            # kg/m^3 of the hull (InterMimic's G1 setting); a known mass wins
     object_friction: float = 0.9            # supp. Table A
@@ -229,6 +284,46 @@ class InteractionEnvCfg:
         if self.reward_set:
             apply_reward_set(self, self.reward_set)
             self.reward_set = None
+
+
+def saved_env_cfg(data: dict, source: str) -> InteractionEnvCfg:
+    """The task config a run saved (task.json, an exported policy's metadata 'task'); `source` names it in errors.
+    Runs saved before the retarget: block hold its settings as flat keys retarget_*: they move into the block."""
+    from robot_hoi.utils.config import load_dataclass
+
+    data = dict(data)
+    block = dict(data.get("retarget") or {})
+    for old, new in LEGACY_RETARGET_KEYS.items():
+        if old in data:
+            block[new] = data.pop(old)
+    if block:
+        data["retarget"] = block
+    return load_dataclass(InteractionEnvCfg, data, source)
+
+
+def split_overrides(overrides: list[str], bare: bool = False) -> tuple[list[str], list[str]]:
+    """`--set` values split into (the task config's, the others): env.KEY=VALUE gives KEY=VALUE, and
+    retarget.KEY=VALUE (the retarget: block) stays as it is; `bare`: KEY=VALUE without a prefix is the task
+    config's too (eval's --set). A retarget setting spelled otherwise (env.retarget.KEY, env.retarget_KEY) is an
+    error naming its one spelling."""
+    from robot_hoi.errors import UserError
+
+    task: list[str] = []
+    others: list[str] = []
+    for item in overrides:
+        key, _, value = item.partition("=")
+        key = key.strip()
+        name = key[len("env."):] if key.startswith("env.") else key
+        head = name.partition(".")[0]
+        if name in LEGACY_RETARGET_KEYS or (head == "retarget" and name != key):
+            new = LEGACY_RETARGET_KEYS.get(name) or name.partition(".")[2] or "KEY"
+            raise UserError(f"--set {item}: the retarget settings are the task config's retarget: block, spelled "
+                            f"--set retarget.{new}={value or 'VALUE'}")
+        if head == "retarget" or key.startswith("env.") or bare:
+            task.append(f"{name}={value}" if name != key else item)
+        else:
+            others.append(item)
+    return task, others
 
 
 def reward_set_names() -> list[str]:

@@ -86,49 +86,47 @@ _RETARGETS: OrderedDict[str, object] = OrderedDict()
 _RETARGETS_KEPT = 8
 
 
-# The retarget settings a task chooses: (env config field, the RetargetOptions value it sets, its name in errors)
+# The retarget settings a task chooses, each as the user spells it: (key, the RetargetOptions value it sets, its name
+# in errors). The retarget.* keys are the task config's retarget: block (env_cfg.RetargetCfg)
 _RETARGET_SETTINGS = (
-    ("retarget_leg_loads", ("executable", "compensate_leg_loads"), "leg-load compensation"),
-    ("retarget_dynamics", ("executable", "compensate_dynamics"), "dynamics compensation"),
-    ("retarget_finger_closure", ("grasp", "closure"), "finger closure"),
-    ("retarget_squeeze_toward", ("executable", "squeeze_toward"), "squeeze"),
-    ("retarget_squeeze_depth", ("executable", "squeeze_depth"), "squeeze depth"),
-    ("object_collision", ("mapping", "object_collision"), "object collision shape"),
-    ("retarget_fingertip_underside_reach", ("mapping", "fingertip_underside_reach"), "fingertip underside reach"),
-    ("retarget_solver", ("ik", "solver"), "IK solver"),
-    ("retarget_grasp", ("grasp_plan", "enabled"), "grasp planning"),
+    ("retarget.leg_loads", ("executable", "compensate_leg_loads"), "leg-load compensation"),
+    ("retarget.dynamics", ("executable", "compensate_dynamics"), "dynamics compensation"),
+    ("retarget.finger_closure", ("grasp", "closure"), "finger closure"),
+    ("retarget.squeeze_toward", ("executable", "squeeze_toward"), "squeeze"),
+    ("retarget.squeeze_depth", ("executable", "squeeze_depth"), "squeeze depth"),
+    ("env.object_collision", ("mapping", "object_collision"), "object collision shape"),
+    ("retarget.fingertip_underside_reach", ("mapping", "fingertip_underside_reach"), "fingertip underside reach"),
+    ("retarget.solver", ("ik", "solver"), "IK solver"),
+    ("retarget.grasp", ("grasp_plan", "enabled"), "grasp planning"),
+    ("retarget.anchor_mode", ("mapping", "anchor_mode"), "anchor mode"),
 )
 
 
+def _task_setting(env_cfg: InteractionEnvCfg, key: str):
+    section, name = key.split(".")
+    return getattr(env_cfg.retarget if section == "retarget" else env_cfg, name)
+
+
 def retarget_options(env_cfg: InteractionEnvCfg | None = None):
-    """RetargetOptions with the task's retarget settings (the retarget's defaults where the config has none)."""
-    from robot_hoi.retarget.executable import check_squeeze_depth, check_squeeze_toward
-    from robot_hoi.retarget.hands import check_closure
-    from robot_hoi.retarget.ik import IK_SOLVERS
+    """RetargetOptions with the task's retarget settings (the retarget's defaults where the config has none; the
+    values were checked when the config was built, env_cfg.RetargetCfg)."""
     from robot_hoi.retarget.pipeline import RetargetOptions
 
     options = RetargetOptions()
-    if getattr(env_cfg, "retarget_finger_closure", None) is not None:
-        check_closure(env_cfg.retarget_finger_closure, "env.retarget_finger_closure")
-    if getattr(env_cfg, "retarget_squeeze_toward", None) is not None:
-        check_squeeze_toward(env_cfg.retarget_squeeze_toward, "env.retarget_squeeze_toward")
-    if getattr(env_cfg, "retarget_squeeze_depth", None) is not None:
-        check_squeeze_depth(env_cfg.retarget_squeeze_depth, "env.retarget_squeeze_depth")
-    if getattr(env_cfg, "retarget_solver", None) not in (None, *IK_SOLVERS):
-        raise UserError(f"env.retarget_solver must be one of {', '.join(IK_SOLVERS)}, got {env_cfg.retarget_solver!r}")
-    for field, (group, name), _ in _RETARGET_SETTINGS:
-        value = getattr(env_cfg, field, None) if env_cfg is not None else None
+    if env_cfg is None:
+        return options
+    for key, (group, name), _ in _RETARGET_SETTINGS:
+        value = _task_setting(env_cfg, key)
         if value is not None:
             options = replace(options, **{group: replace(getattr(options, group), **{name: value})})
-    if env_cfg is not None:  # planned grips carry the weight the simulation gives the object
-        options = replace(options, grasp_plan=replace(options.grasp_plan, object_density=env_cfg.object_density))
-    return options
+    # planned grips carry the weight the simulation gives the object
+    return replace(options, grasp_plan=replace(options.grasp_plan, object_density=env_cfg.object_density))
 
 
 def load_or_retarget(clip, embodiment, cache: Path | None, options=None):
     """The clip's robot-space reference (RobotMotion), cached as npz next to the run. `options`: RetargetOptions
-    (retarget_options(env_cfg); None = the defaults); a cached reference made with other task settings (leg loads,
-    dynamics, finger closure) is an error, not silently reused."""
+    (retarget_options(env_cfg); None = the defaults); a cached reference made with other task settings (the task
+    config's retarget: block, env.object_collision) is an error, not silently reused."""
     from robot_hoi.retarget.motion import RobotMotion
     from robot_hoi.retarget.pipeline import retarget_clip
     from robot_hoi.utils.fingerprint import fingerprint
@@ -144,13 +142,13 @@ def load_or_retarget(clip, embodiment, cache: Path | None, options=None):
                             f"({motion.num_frames} frames, the clip has {clip.num_frames}); delete the file to "
                             "retarget, or use the clip it was made from")
         defaults = retarget_options()
-        for field, (group, name), label in _RETARGET_SETTINGS:
+        for setting, (group, name), label in _RETARGET_SETTINGS:
             default = getattr(getattr(defaults, group), name)
             made_with = motion.meta.get(group, {}).get(name, default)  # older files: the default of its time
             wanted = getattr(getattr(options, group), name)
             if made_with != wanted:
                 raise UserError(f"{path}: this reference was retargeted with {label} {_setting(made_with)}, the task "
-                                f"asks for it {_setting(wanted)} ({field}); delete the file to retarget, or keep the "
+                                f"asks for it {_setting(wanted)} ({setting}); delete the file to retarget, or keep the "
                                 "setting it was made with")
         return motion
     key = fingerprint((clip, embodiment, options))
