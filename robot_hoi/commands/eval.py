@@ -101,7 +101,9 @@ def _rate(r: dict, one_trajectory: bool = False) -> str:
     return f"{r['rate']:.2f} (one trajectory)" if one_trajectory else f"{r['rate']:.2f} [{r['lo']:.2f}, {r['hi']:.2f}]"
 
 
-def _mean(m: dict, fmt: str = ".1f") -> str:
+def _mean(m: dict | None, fmt: str = ".1f") -> str:
+    if m is None:  # a record written before the figure existed
+        return "-"
     if m["lo"] is None:
         return format(m["mean"], fmt)
     return f"{m['mean']:{fmt}} [{m['lo']:{fmt}}, {m['hi']:{fmt}}]"
@@ -120,7 +122,7 @@ def print_record(record: dict) -> None:
     for suffix, clips, overall in sections:
         table = Table()
         for col in ("clip", "definition", "success (95 %)", "interaction", "duration s (95 %)", "of clip", "E_h cm",
-                    "E_o cm", "E_o max"):
+                    "E_o cm", "E_o max", "E_o clip path"):
             table.add_column(col, justify="left" if col in ("clip", "definition") else "right")
         rows = [(name, clip, clip["clip_duration_s"]) for name, clip in clips.items()]
         if len(clips) > 1:
@@ -132,7 +134,7 @@ def print_record(record: dict) -> None:
                 table.add_row(name if definition == "ours" else "", definition, _rate(r["success"], one),
                               _rate(r["interaction_success"], one) if definition == "ours" else "-", duration,
                               f"{100 * r['duration_share']['mean']:.0f} %", _mean(r["E_h_cm"]), _mean(r["E_o_cm"]),
-                              f"{r['E_o_max_cm']['mean']:.1f}")
+                              f"{r['E_o_max_cm']['mean']:.1f}", _mean(r.get("E_o_source_cm")))
         # the heading on its own line: a table title wraps at the table's width, splitting long checkpoint paths
         console.print(f"robot-hoi eval{suffix}: {record['checkpoint']}", markup=False, highlight=False)
         console.print(table)

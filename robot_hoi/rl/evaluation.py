@@ -141,7 +141,7 @@ def evaluate(env, model, stochastic: bool = False) -> dict[str, Any]:
     stats = {k: torch.cat(v) for k, v in finished.items()}
     reasons = {k.split("/", 1)[1]: v for k, v in stats.items() if k.startswith("ended_by/")}
     per_episode = {key: stats[key].tolist() for key in
-                   ("success", "interaction_success", "duration_s", "E_h_cm", "E_o_cm", "E_o_max_cm")}
+                   ("success", "interaction_success", "duration_s", "E_h_cm", "E_o_cm", "E_o_max_cm", "E_o_source_cm")}
     per_episode["ended_by"] = [[name for name, fired in reasons.items() if fired[i] > 0] or ["clip_end"]
                                for i in range(int(counted.sum()))]
     return {
@@ -154,6 +154,8 @@ def evaluate(env, model, stochastic: bool = False) -> dict[str, Any]:
         "E_h_cm": stats["E_h_cm"].mean().item(),
         "E_o_cm": stats["E_o_cm"].mean().item(),
         "E_o_max_cm": stats["E_o_max_cm"].mean().item(),
+        # against the clip's own object path; differs from E_o where a planned grasp moved the reference's object
+        "E_o_source_cm": stats["E_o_source_cm"].mean().item(),
         "return": returns[counted].mean().item(),
         # share of the episodes each termination ended (several can fire on one step; none: the clip's end)
         "ended_by": {name: v.mean().item() for name, v in reasons.items()},
@@ -235,6 +237,7 @@ def definition_report(per_episode: dict[str, list], clip_duration_s: list[float]
         "E_h_cm": mean_interval(per_episode["E_h_cm"]),
         "E_o_cm": mean_interval(per_episode["E_o_cm"]),
         "E_o_max_cm": mean_interval(per_episode["E_o_max_cm"]),
+        "E_o_source_cm": mean_interval(per_episode["E_o_source_cm"]) if "E_o_source_cm" in per_episode else None,
         "ended_by": {k: v / n for k, v in sorted(ended.items(), key=lambda kv: -kv[1])},
     }
 

@@ -405,3 +405,25 @@ def test_accelerations_with_live_float32_state(scene):
     env.step(0.3 * torch.randn(2, env.num_actions, generator=torch.Generator().manual_seed(0)))
     assert env.object_acc[:, 2] == pytest.approx([-9.81, -9.81], abs=0.05)
     assert env.link_acc.abs().max() > 0.1
+
+
+def test_object_error_is_reported_against_the_clip_s_own_path_too(scene):
+    """A reference whose object path a grasp moved 5 cm off the clip's own: E_o follows the reference's path,
+    E_o_source the clip's, so a reference cannot make the task easier by moving the object unnoticed."""
+    moved = standing_reference(scene)
+    moved.source_object_pos = moved.object_pos + torch.tensor([0.05, 0.0, 0.0])
+    moved.source_object_quat_wxyz = moved.object_quat_wxyz.clone()
+    env = make_env(scene, [moved], terminations={"max_mean_link_error": 10.0})
+    done = torch.zeros(env.num_envs, dtype=torch.bool)
+    for _ in range(5):
+        _, _, terminated, truncated, extras = env.step(torch.zeros(env.num_envs, env.num_actions))
+        done |= terminated | truncated
+    assert not done.any()
+    stats = env._episode_stats(torch.ones(env.num_envs, dtype=torch.bool), done, done)
+    assert (stats["E_o_cm"] < 1.0).all()  # the box rests where the reference has it
+    assert torch.allclose(stats["E_o_source_cm"], torch.full_like(stats["E_o_source_cm"], 5.0), atol=1.0)
+    plain = make_env(scene)  # a reference without a source path of its own: the two agree
+    plain.step(torch.zeros(plain.num_envs, plain.num_actions))
+    ones = torch.ones(plain.num_envs, dtype=torch.bool)
+    stats = plain._episode_stats(ones, ~ones, ~ones)
+    assert torch.allclose(stats["E_o_cm"], stats["E_o_source_cm"])

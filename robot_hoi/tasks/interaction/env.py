@@ -148,6 +148,11 @@ class InteractionEnv:
         self.ref_link_pos, self.ref_link_quat = cat("link_pos"), cat("link_quat_wxyz")
         self.ref_d_hat, self.ref_hand_contact = cat("d_hat"), cat("hand_contact")
         self.ref_object_pos, self.ref_object_quat = cat("object_pos"), cat("object_quat_wxyz")
+        # the clip's own object path (a grasp may move the reference's): evaluation reports E_o against both
+        source = lambda name, own: torch.cat([own(r) if getattr(r, name) is None else getattr(r, name)  # noqa: E731
+                                              for r in references]).to(self.device)
+        self.source_object_pos = source("source_object_pos", lambda r: r.object_pos)
+        self.source_object_rotmat = quat_to_matrix(source("source_object_quat_wxyz", lambda r: r.object_quat_wxyz))
         self.ref_object_lin_vel, self.ref_object_ang_vel = cat("object_lin_vel"), cat("object_ang_vel")
         self.ref_robot_qpos, self.ref_robot_qvel = cat("robot_qpos"), cat("robot_qvel")
         self.ref_joint_pos = cat("joint_pos")
@@ -182,7 +187,7 @@ class InteractionEnv:
         self.prev_link_vel = z(n, self.layout.num_links, 3)
         self.prev_object_vel = z(n, 3)
         self.episode_sums: dict[str, Tensor] = {name: z(n) for name in self.reward_weights}
-        self.episode_error_h, self.episode_error_o = z(n), z(n)
+        self.episode_error_h, self.episode_error_o, self.episode_error_o_source = z(n), z(n), z(n)
         self.episode_max_error_h, self.episode_max_error_o = z(n), z(n)
         self.failure_counts = z(len(self.references), self.cfg.init.failure_segments)
         self.assisted = z(n)  # 1 where this episode gets the assist wrenches (drawn per episode)
@@ -367,8 +372,12 @@ class InteractionEnv:
         body = self.scene.body_link_ids  # E_h excludes hand joints for OMOMO (InterMimic Sec. 4)
         error_h = (self.ref.link_pos[:, body] - self.link_pos[:, body]).norm(dim=-1).mean(-1)
         error_o = (self.object_points_world - self.ref_object_points_world).norm(dim=-1).mean(-1)
+        source_points = object_points_world(self.object_points, self.source_object_pos[self.ref_index],
+                                            self.source_object_rotmat[self.ref_index])
+        error_source = (self.object_points_world - source_points).norm(dim=-1).mean(-1)
         self.episode_error_h += torch.where(tracking, error_h, 0.0)
         self.episode_error_o += torch.where(tracking, error_o, 0.0)
+        self.episode_error_o_source += torch.where(tracking, error_source, 0.0)
         self.episode_max_error_h = torch.maximum(self.episode_max_error_h, torch.where(tracking, error_h, 0.0))
         self.episode_max_error_o = torch.maximum(self.episode_max_error_o, torch.where(tracking, error_o, 0.0))
 
@@ -392,6 +401,7 @@ class InteractionEnv:
             "duration_s": steps * self.dt,
             "E_h_cm": 100 * self.episode_error_h[done] / steps,
             "E_o_cm": 100 * self.episode_error_o[done] / steps,
+            "E_o_source_cm": 100 * self.episode_error_o_source[done] / steps,
             "clip_id": self.clip_id[done].float(),
         }
 
@@ -474,6 +484,7 @@ class InteractionEnv:
             s[env_ids] = 0.0
         self.episode_error_h[env_ids] = 0.0
         self.episode_error_o[env_ids] = 0.0
+        self.episode_error_o_source[env_ids] = 0.0
         self.episode_max_error_h[env_ids] = 0.0
         self.episode_max_error_o[env_ids] = 0.0
         self._update_state(None if n == self.num_envs else env_ids)  # env_ids are distinct: n == all of them
