@@ -6,7 +6,10 @@ Only argparse here; the runtime is imported inside the handler so `robot-hoi --h
 from __future__ import annotations
 
 import argparse
+import contextlib
+import logging
 import sys
+import traceback
 
 EPILOG = """examples:
   robot-hoi deploy --dry-run --policy policies/dev.onnx --duration 5 --auto-start
@@ -131,8 +134,6 @@ def options_from_args(args: argparse.Namespace):
 
 def handler(args: argparse.Namespace) -> int:
     """Run; the exit code says why the run ended (deploy.outcome). Signals go through deploy.signals."""
-    import logging
-
     from deploy.session import Session, format_summary
     from deploy.signals import Interrupted, SignalRouter
 
@@ -153,9 +154,6 @@ def handler(args: argparse.Namespace) -> int:
         except Exception as exc:
             if getattr(exc, "user_error", False):
                 raise  # one line and exit 2, printed by the entry point
-            import contextlib
-            import traceback
-
             with contextlib.suppress(OSError):  # stderr may be a terminal that is gone
                 traceback.print_exc()
             return 70  # deploy.outcome.Outcome.CRASHED; summary.json (if the run had started) says more

@@ -298,7 +298,7 @@ class PolicyContract:
     @classmethod
     def from_onnx(cls, path: str | os.PathLike) -> PolicyContract:
         """Parse and validate a policy file's contract (graph inputs/outputs + metadata)."""
-        from deploy.policy import open_session
+        from deploy.policy import open_session  # not at the top: a cycle (policy builds on this module)
 
         return cls.from_session(open_session(path), str(path))
 

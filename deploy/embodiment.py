@@ -18,6 +18,7 @@ import yaml
 
 from deploy.errors import ContractError, DeployError
 from deploy.hand_units import HAND_SIDES, INSPIRE_CHANNELS, HandChannel
+from deploy.hands.tables import REGISTERS
 
 if TYPE_CHECKING:
     from deploy.contract import PolicyContract
@@ -174,8 +175,6 @@ def load_embodiment(name_or_path: str | os.PathLike) -> EmbodimentConfig:
 
 
 def _deploy_limits(path: Path, raw, names: list[str]) -> DeployLimits:
-    from deploy.hands.tables import REGISTERS
-
     if not isinstance(raw, dict) or not isinstance(raw.get("joint_limits"), dict):
         raise DeployError(f"{path}: 'deploy' must be a mapping with 'joint_limits' (actuator: [lower, upper, effort])")
     joints = {}

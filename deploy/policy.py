@@ -6,6 +6,7 @@ import os
 from pathlib import Path
 
 import numpy as np
+import onnxruntime as ort
 
 from deploy.contract import INPUT_NAME, OUTPUT_NAME, PolicyContract
 from deploy.errors import ContractError, DeployError
@@ -13,8 +14,6 @@ from deploy.errors import ContractError, DeployError
 
 def open_session(path: str | os.PathLike):
     """An onnxruntime CPU session with one intra-op thread (lowest jitter on the robot's small CPU)."""
-    import onnxruntime as ort
-
     path = Path(path)
     if not path.is_file():
         raise DeployError(f"{path}: policy file not found")

@@ -24,6 +24,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from deploy.atomic import atomic_write_text
+from deploy.body.dds_loopback import DdsLoopbackRobot
+from deploy.body.simulated import SimulatedBody
 from deploy.body.unitree_dds import UnitreeDdsBody
 from deploy.clock import MonotonicClock
 from deploy.contract import check_against_embodiment
@@ -31,7 +33,8 @@ from deploy.embodiment import load_embodiment, resolve_embodiment_path
 from deploy.errors import BodyLinkError, DeployError, HandFaultError, HandLinkError
 from deploy.hand_budget import plan_hand_rate, plan_hand_timing
 from deploy.hand_pair import Hands
-from deploy.hands import DEFAULT_BAUDRATE, DEFAULT_CAN_BITRATE
+from deploy.hands import DEFAULT_BAUDRATE, DEFAULT_CAN_BITRATE, make_hand_bus
+from deploy.hands.simulated import start_simulated_hand
 from deploy.loop import Runtime
 from deploy.motion import load_motion
 from deploy.observations import ObservationBuilder
@@ -41,6 +44,9 @@ from deploy.policy import OnnxPolicy
 from deploy.runlog import EventLog, TickRecorder
 from deploy.safety import SafetyConfig
 from deploy.status import make_status_view
+from deploy.tracking import NoTracker, ReplayTracker, SimulatedTracker
+from deploy.tracking_udp import UdpPoseReceiver
+from deploy.watchdog import NullWatchdog, ProcessWatchdog, ThreadWatchdog
 
 log = logging.getLogger("deploy.session")
 
@@ -220,14 +226,10 @@ class Session(contextlib.ExitStack):
         if kind == "sim":
             if not o.dry_run:
                 raise DeployError("the simulated body is only for --dry-run")
-            from deploy.body.simulated import SimulatedBody
-
             body = SimulatedBody(contract.num_body, clock=self.clock)
         elif kind == "dds":
             interface = o.dds_interface
             if o.dry_run:
-                from deploy.body.dds_loopback import DdsLoopbackRobot
-
                 interface = interface or "lo"
                 robot = DdsLoopbackRobot(o.dds_domain, interface, contract.num_body).start()
                 self.callback(robot.stop)
@@ -245,8 +247,6 @@ class Session(contextlib.ExitStack):
     def _watchdog(self, body, contract, rate: float, mode_machine: int | None):
         """Damps when the loop's heartbeat stops: a child process with its own DDS participant for a DDS body (it
         outlives a killed runtime), a thread for the in-process simulated body."""
-        from deploy.watchdog import NullWatchdog, ProcessWatchdog, ThreadWatchdog
-
         o = self.options
         if o.safety.watchdog_s is None:
             watchdog = NullWatchdog()
@@ -263,8 +263,6 @@ class Session(contextlib.ExitStack):
     def _tracker(self, motion, contract):
         o = self.options
         if not contract.needs_tracker:  # its observation reads no tracked pose: no mocap to ask for
-            from deploy.tracking import NoTracker
-
             self.description["tracker"] = "none (the policy reads no tracked pose)"
             if o.tracker is not None:
                 log.warning("--tracker %s unused: %s reads no tracked pose", o.tracker, contract.source)
@@ -272,18 +270,12 @@ class Session(contextlib.ExitStack):
         kind = o.tracker or ("sim" if o.dry_run else "udp")
         self.description["tracker"] = kind
         if kind == "sim":
-            from deploy.tracking import SimulatedTracker
-
             tracker = SimulatedTracker(motion, clock=self.clock)
         elif kind == "replay":
-            from deploy.tracking import ReplayTracker
-
             if motion is None:
                 raise DeployError("--tracker replay needs a motion (--motion or the policy's sidecar)")
             tracker = ReplayTracker(motion, clock=self.clock)
         elif kind == "udp":
-            from deploy.tracking_udp import UdpPoseReceiver
-
             tracker = UdpPoseReceiver(o.tracker_host, o.tracker_port, clock=self.clock)
             self.description["tracker"] = f"udp {o.tracker_host}:{o.tracker_port}"
         else:
@@ -311,8 +303,6 @@ class Session(contextlib.ExitStack):
         return real_ports, hand_ids
 
     def _hands(self, contract, real_ports: bool, hand_ids: list[int], rate: float) -> Hands:
-        from deploy.hands import make_hand_bus
-
         o = self.options
         transport = o.hand_bus
         sim_options = {"channel": f"inspire-sim-{id(self):x}"} if transport == "can" else {}  # one CAN bus
@@ -325,8 +315,6 @@ class Session(contextlib.ExitStack):
                     kwargs = {"port": o.hand_ports[i]}
                 kwargs["hand_id"] = hand_ids[i]
             else:
-                from deploy.hands.simulated import start_simulated_hand
-
                 sim = start_simulated_hand(transport, side, hand_id=hand_ids[i], **sim_options)
                 self.callback(sim.stop)
                 kwargs = sim.bus_kwargs()

@@ -11,6 +11,10 @@ from __future__ import annotations
 import sys
 from typing import TextIO
 
+from rich.console import Console
+from rich.live import Live
+from rich.text import Text
+
 
 def status_text(runtime) -> str:
     """One line: 'POLICY 12.3 s | loop 30 Hz, late p99 0.8 ms, overruns 0 | hands L 30.0 R 30.0 Hz | faults none'."""
@@ -53,9 +57,6 @@ class PlainStatus(NullStatus):
 
 class RichStatus(NullStatus):
     def __init__(self, stream: TextIO | None = None, refresh_hz: float = 4.0):
-        from rich.console import Console
-        from rich.live import Live
-
         self.console = Console(file=stream or sys.stderr)
         self.live = Live(console=self.console, auto_refresh=False, transient=True)
         self.live.start()
@@ -64,8 +65,6 @@ class RichStatus(NullStatus):
         self._phase = None
 
     def update(self, runtime) -> None:
-        from rich.text import Text
-
         now = runtime.clock.now()
         if runtime.phase != self._phase:  # phase changes stay on screen above the live line
             self._phase = runtime.phase

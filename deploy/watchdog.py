@@ -33,6 +33,10 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
+import numpy as np
+
+from deploy.body.unitree_dds import LOWCMD_TOPIC, dds_participant, idl_types, lowcmd_to_idl
+from deploy.body.unitree_lowlevel import make_lowcmd
 from deploy.errors import DeployError
 
 
@@ -186,11 +190,6 @@ class _DdsDamper:
     """The child's side: a DDS participant from the start, an rt/lowcmd writer only once it fires."""
 
     def __init__(self, config: dict):
-        import numpy as np
-
-        from deploy.body.unitree_dds import dds_participant, idl_types, lowcmd_to_idl
-        from deploy.body.unitree_lowlevel import make_lowcmd
-
         self.config = config
         self.T = idl_types()
         self.participant = dds_participant(config["domain_id"], config["interface"])
@@ -205,8 +204,6 @@ class _DdsDamper:
         sample published before discovery is lost), at most 2 s longer."""
         from cyclonedds.pub import DataWriter
         from cyclonedds.topic import Topic
-
-        from deploy.body.unitree_dds import LOWCMD_TOPIC
 
         writer = DataWriter(self.participant, Topic(self.participant, LOWCMD_TOPIC, self.T.LowCmd_))
         start = time.monotonic()

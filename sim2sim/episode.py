@@ -12,6 +12,7 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field
 
+import mujoco
 import numpy as np
 
 from deploy.loop import Runtime
@@ -87,8 +88,6 @@ def _policy(path: str) -> OnnxPolicy:
 
 def start_qpos(model, layout: WorldLayout, motion, rng: np.random.Generator) -> np.ndarray:
     """The default stand (the model's 'default' keyframe) at the reference's first root position and heading."""
-    import mujoco
-
     key = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_KEY, "default")
     qpos = np.array(model.key_qpos[key][: layout.robot_nq], dtype=np.float64)
     qpos[0:2] = motion.root_pos[0, 0:2] + rng.uniform(-SPAWN_NOISE_XY, SPAWN_NOISE_XY, 2)

@@ -13,10 +13,27 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import mujoco
 import numpy as np
+import onnxruntime
 
+from deploy.contract import PolicyContract, check_against_embodiment
+from deploy.embodiment import resolve_embodiment_path
+from robot_hoi.embodiment import build_model, load_embodiment
 from robot_hoi.errors import UserError
+from sim2sim import plots as plotting
+from sim2sim.episode import SIM2SIM_SAFETY, EpisodeJob
+from sim2sim.hands import DIRECT_TRANSPORTS
+from sim2sim.layout import WorldLayout
+from sim2sim.perturbations import resolve_suite
+from sim2sim.physics import PhysicsSettings, differences, training_physics
+from sim2sim.report import load_previous, write_report
+from sim2sim.runner import default_workers, run_jobs
+from sim2sim.scene import load_model
+from sim2sim.summary import build_cells, episode_record
+from sim2sim.targets import clip_targets, policy_targets, task_config
 from sim2sim.verdict import ReadyThresholds, verdict
+from sim2sim.video import VideoRequest, reference_qpos, render_videos
 
 
 @dataclass
@@ -62,9 +79,6 @@ def _sha256(path: str) -> str:
 
 
 def _load_policy(path: str, label: str, embodiment: str):
-    from deploy.contract import PolicyContract, check_against_embodiment
-    from deploy.embodiment import resolve_embodiment_path
-
     if not Path(path).is_file():
         raise UserError(f"{path}: policy file not found")
     contract = PolicyContract.from_onnx(path)
@@ -94,11 +108,6 @@ def machine() -> dict:
                 break
     except OSError:
         pass
-    import mujoco
-    import onnxruntime
-
-    from sim2sim.runner import default_workers
-
     cores = default_workers()
     return {"cpu": cpu, "cores": cores, "python": platform.python_version(), "mujoco": mujoco.__version__,
             "onnxruntime": onnxruntime.__version__, "description": f"{cpu}, {cores} core(s)"}
@@ -109,17 +118,6 @@ def _seed(base: int, perturbation_index: int, episode: int) -> int:
 
 
 def evaluate(o: Sim2SimOptions) -> tuple[dict, dict[str, Path]]:
-    from robot_hoi.embodiment import build_model, load_embodiment
-    from sim2sim import plots as plotting
-    from sim2sim.episode import EpisodeJob
-    from sim2sim.hands import DIRECT_TRANSPORTS
-    from sim2sim.perturbations import resolve_suite
-    from sim2sim.physics import PhysicsSettings, differences, training_physics
-    from sim2sim.report import load_previous, write_report
-    from sim2sim.runner import default_workers, run_jobs
-    from sim2sim.summary import build_cells, episode_record
-    from sim2sim.targets import clip_targets, policy_targets, task_config
-
     if o.episodes < 1:
         raise UserError(f"--episodes must be >= 1, got {o.episodes}")
     if o.seconds is not None and o.seconds <= 0:
@@ -209,15 +207,13 @@ def evaluate(o: Sim2SimOptions) -> tuple[dict, dict[str, Path]]:
     if previous is not None:
         _merge_previous(report, previous)
 
-    plots = _plots(report, results, entries, perturbations, plotting)
+    plots = _plots(report, results, entries, perturbations)
     report["videos"], report["render"] = _videos(results, entries, out, o.videos, say)
     paths = write_report(report, plots, out)
     return report, paths
 
 
 def _safety() -> dict:
-    from sim2sim.episode import SIM2SIM_SAFETY
-
     return dict(SIM2SIM_SAFETY)
 
 
@@ -236,7 +232,7 @@ def _merge_previous(report: dict, previous: dict) -> None:
                                "timing": previous.get("timing")}
 
 
-def _plots(report, results, entries, perturbations, plotting) -> list[tuple[str, bytes]]:
+def _plots(report, results, entries, perturbations) -> list[tuple[str, bytes]]:
     names = [p["name"] for p in report["perturbations"]]
     cells = report["cells"]
     out = [
@@ -268,10 +264,6 @@ def _plots(report, results, entries, perturbations, plotting) -> list[tuple[str,
 
 
 def _videos(results, entries, out: Path, count: int, say) -> tuple[list[dict], dict]:
-    from sim2sim.layout import WorldLayout
-    from sim2sim.scene import load_model
-    from sim2sim.video import VideoRequest, reference_qpos, render_videos
-
     if count <= 0:
         return [], {"backend": None, "message": "videos not requested (--videos 0)"}
     done = [r for r in results if "trace" in r]

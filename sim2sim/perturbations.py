@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field, replace
 
+from robot_hoi.errors import UserError
 from sim2sim.physics import PhysicsSettings
 
 NOMINAL_PHYSICS = PhysicsSettings()
@@ -98,8 +99,6 @@ EVERY_CONDITION_SUITES = ("hardware",)
 
 def resolve_suite(suite: str, only: list[str] | None = None) -> list[Perturbation]:
     """The perturbations of a suite (optionally only the named ones, which may come from any suite)."""
-    from robot_hoi.errors import UserError
-
     if only:
         unknown = [n for n in only if n not in ALL]
         if unknown:

@@ -13,6 +13,8 @@ from __future__ import annotations
 import math
 from dataclasses import asdict, dataclass
 
+import mujoco
+
 INTEGRATORS = ("euler", "rk4", "implicit", "implicitfast")
 SOLVERS = ("pgs", "cg", "newton")
 CONES = ("pyramidal", "elliptic")
@@ -53,8 +55,6 @@ class PhysicsSettings:
 
     def apply(self, model) -> None:
         """Write the settings into a compiled mujoco.MjModel."""
-        import mujoco
-
         model.opt.timestep = self.timestep
         model.opt.integrator = getattr(mujoco.mjtIntegrator, f"mjINT_{self.integrator.upper()}")
         model.opt.solver = getattr(mujoco.mjtSolver, f"mjSOL_{self.solver.upper()}")
@@ -72,8 +72,6 @@ class PhysicsSettings:
 
 def training_physics(model) -> dict:
     """What the training model (robot_hoi.embodiment.build_model) runs with, for the report's comparison."""
-    import mujoco
-
     opt = model.opt
     return {
         "timestep": float(opt.timestep),

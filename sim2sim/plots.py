@@ -5,6 +5,7 @@ from __future__ import annotations
 import io
 
 import numpy as np
+from matplotlib.figure import Figure
 
 from sim2sim.summary import METRIC_LABELS, cell_value
 
@@ -18,8 +19,6 @@ def _png(fig) -> bytes:
 
 
 def _figure(width: float, height: float, rows: int = 1, cols: int = 1):
-    from matplotlib.figure import Figure
-
     fig = Figure(figsize=(width, height))
     axes = fig.subplots(rows, cols, squeeze=False)
     return fig, axes

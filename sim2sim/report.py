@@ -9,12 +9,16 @@ from __future__ import annotations
 import base64
 import html
 import json
+import math
 import os
 from pathlib import Path
+
+import numpy as np
 
 from deploy.atomic import atomic_write_bytes, atomic_write_text
 from robot_hoi.errors import UserError
 from sim2sim.tables import Table, perturbation_table, result_tables, setup_table
+from sim2sim.verdict import verdict_lines
 
 FORMAT = "robot-hoi sim2sim report"
 VERSION = 1
@@ -22,10 +26,6 @@ VERSION = 1
 
 def _plain(value):
     """JSON-ready copy: numpy scalars and arrays as Python values, nan and inf as null."""
-    import math
-
-    import numpy as np
-
     if isinstance(value, dict):
         return {str(k): _plain(v) for k, v in value.items()}
     if isinstance(value, list | tuple):
@@ -105,8 +105,6 @@ def fmt_rtf(value) -> str:
 
 
 def _verdict(report: dict) -> list[str]:
-    from sim2sim.verdict import verdict_lines
-
     return verdict_lines(report["verdict"]) if report.get("verdict") else []
 
 

@@ -14,7 +14,10 @@ Workers load the bytes with `load_model` and never import robot_hoi.sim (which p
 
 from __future__ import annotations
 
+import mujoco
 import numpy as np
+
+from robot_hoi.embodiment import build_robot_spec, load_embodiment
 
 GANTRY = "sim2sim_gantry"
 PELVIS = "pelvis"
@@ -23,9 +26,6 @@ PELVIS = "pelvis"
 def build_scene_bytes(embodiment: str, object_asset, *, self_collision: bool = True, density: float = 25.0,
                       friction: float = 0.9, torsional_friction: float = 0.0, object_collision: str = "hull") -> bytes:
     """Compile the validation scene for one object and return it as MJB bytes."""
-    import mujoco
-
-    from robot_hoi.embodiment import build_robot_spec, load_embodiment
     from robot_hoi.sim.scene import add_task_object
 
     cfg = load_embodiment(embodiment)
@@ -53,8 +53,6 @@ def build_scene_bytes(embodiment: str, object_asset, *, self_collision: bool = T
 
 
 def model_to_bytes(model) -> bytes:
-    import mujoco
-
     buffer = np.empty(mujoco.mj_sizeModel(model), dtype=np.uint8)
     mujoco.mj_saveModel(model, None, buffer)
     return buffer.tobytes()
@@ -62,6 +60,4 @@ def model_to_bytes(model) -> bytes:
 
 def load_model(blob: bytes):
     """MJB bytes -> mujoco.MjModel (through MuJoCo's in-memory asset loader; no file is written)."""
-    import mujoco
-
     return mujoco.MjModel.from_binary_path("scene.mjb", {"scene.mjb": blob})

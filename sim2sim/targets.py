@@ -15,7 +15,14 @@ from pathlib import Path
 
 import numpy as np
 
-from deploy.motion import ReferenceMotion
+from deploy.errors import DeployError
+from deploy.motion import ReferenceMotion, load_motion
+from robot_hoi.embodiment import load_embodiment
+from robot_hoi.errors import UserError
+from robot_hoi.paths import TASK_CONFIG
+from robot_hoi.utils.config import load_yaml_dataclass
+from sim2sim.metrics import subsample_points
+from sim2sim.scene import build_scene_bytes
 
 
 @dataclass
@@ -39,10 +46,7 @@ class EvalTarget:
 def task_config(contract=None):
     """The interaction task config the policy was trained with: the one its metadata records (contract.task), else
     (files exported before it was recorded) configs/tasks/interaction.yaml."""
-    from robot_hoi.paths import TASK_CONFIG
     from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg, saved_env_cfg
-    from robot_hoi.utils.config import load_yaml_dataclass
-
     if contract is not None and contract.task is not None:
         return saved_env_cfg(contract.task["env"], f"{contract.source} metadata 'task'")
     return load_yaml_dataclass(InteractionEnvCfg, TASK_CONFIG)
@@ -50,8 +54,6 @@ def task_config(contract=None):
 
 def _clip_extras(clip, num_frames: int, points: int) -> tuple[np.ndarray, np.ndarray]:
     from robot_hoi.tasks.interaction.reference import _hand_contact_markers  # training's own definition
-    from sim2sim.metrics import subsample_points
-
     markers = np.asarray(_hand_contact_markers(clip, num_frames), dtype=bool)
     if len(markers) < num_frames:  # the reference may be longer than the labelled clip: hold the last label
         markers = np.concatenate([markers, np.repeat(markers[-1:], num_frames - len(markers), axis=0)])
@@ -59,9 +61,6 @@ def _clip_extras(clip, num_frames: int, points: int) -> tuple[np.ndarray, np.nda
 
 
 def _target(clip, source: str, motion: ReferenceMotion, embodiment: str, self_collision: bool, env_cfg) -> EvalTarget:
-    from robot_hoi.errors import UserError
-    from sim2sim.scene import build_scene_bytes
-
     if clip.object is None:
         raise UserError(f"{source}: clip {clip.name} has no object mesh; sim2sim needs the object")
     points, markers = _clip_extras(clip, motion.num_frames, env_cfg.object_surface_points)
@@ -80,9 +79,6 @@ def policy_targets(contract, motion_path: str | None, embodiment: str, self_coll
                    clip_options: dict | None = None, env_cfg=None) -> list[EvalTarget]:
     """The policy's own reference (its sidecar, or --motion) on the object of the clip it was exported with.
     `env_cfg`: the policy's task config when the caller has it (else read with task_config)."""
-    from deploy.errors import DeployError
-    from deploy.motion import load_motion
-    from robot_hoi.errors import UserError
     from robot_hoi.tasks.interaction.factory import load_source
 
     if motion_path:
@@ -112,9 +108,6 @@ def clip_targets(contract, sources: list[str], embodiment: str, self_collision: 
                  clip_options: dict | None = None, env_cfg=None) -> list[EvalTarget]:
     """Retarget each clip as training does and evaluate the policy on it (its reference replaces the sidecar).
     `env_cfg`: the policy's task config when the caller has it (else read with task_config)."""
-    from deploy.errors import DeployError
-    from robot_hoi.embodiment import load_embodiment
-    from robot_hoi.errors import UserError
     from robot_hoi.export.motion_sidecar import deploy_motion
     from robot_hoi.tasks.interaction.factory import (
         expand_sources,

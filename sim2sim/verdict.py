@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass
 
+from sim2sim.perturbations import EVERY_CONDITION_SUITES
 from sim2sim.summary import cell_value
 
 
@@ -28,8 +29,6 @@ FLAGS = {"min_success": "--ready-success RATE", "max_e_h_cm": "--ready-e-h CM", 
 def verdict(report: dict, thresholds: ReadyThresholds = ReadyThresholds()) -> dict:
     """{"ready": bool, "checks": [(ok, line)], "thresholds": {...}} for the first policy's nominal cells (and, in a
     suite judged on every condition, its other cells)."""
-    from sim2sim.perturbations import EVERY_CONDITION_SUITES
-
     policy = report["policies"][0]["label"]
     period_ms = 1e3 * report["policies"][0].get("control_dt", 0.02)
     max_tick = thresholds.max_tick_ms or period_ms

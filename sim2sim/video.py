@@ -19,6 +19,8 @@ from queue import Empty
 
 import numpy as np
 
+from deploy.safety import Phase
+
 FALLBACK_BACKENDS = ("egl", "osmesa")
 WIDTH, HEIGHT = 640, 480
 VIDEO_FPS = 15.0  # every other control tick: software GL (Mesa llvmpipe) takes ~40 ms a frame
@@ -39,8 +41,6 @@ class VideoRequest:
 def reference_qpos(trace: dict, motion, layout, warmup_frames: int) -> np.ndarray:
     """(N, nq) per recorded tick: the recorded state with robot and object moved to the reference frame the
     policy tracks then (frame 0 until the policy has run its warmup, as the runtime's clock holds it)."""
-    from deploy.safety import Phase
-
     qpos = np.array(trace["qpos"], dtype=np.float64)
     times = np.asarray(trace["time_s"], dtype=np.float64)
     running = np.flatnonzero(np.asarray(trace["phase"]) == int(Phase.POLICY))

@@ -6,7 +6,6 @@ import argparse
 from pathlib import Path
 
 from robot_hoi.data.cli_options import add_clip_options, clip_options
-from robot_hoi.export.recording import offset_settings, record_observations
 from robot_hoi.paths import EXPORT_DIR
 
 
@@ -55,6 +54,7 @@ def run_onnx(args: argparse.Namespace) -> int:
     from robot_hoi.errors import UserError
     from robot_hoi.export.metadata import clip_identity, policy_metadata
     from robot_hoi.export.onnx_export import export_policy
+    from robot_hoi.export.recording import offset_settings, record_observations
     from robot_hoi.rl.checkpoint import load_policy, resolve_checkpoint
     from robot_hoi.tasks.interaction import factory
     from robot_hoi.tasks.interaction.env_cfg import saved_env_cfg
@@ -131,6 +131,7 @@ def run_untrained(args: argparse.Namespace) -> int:
     from robot_hoi.export.metadata import clip_identity, policy_metadata
     from robot_hoi.export.motion_sidecar import deploy_motion
     from robot_hoi.export.onnx_export import export_policy
+    from robot_hoi.export.recording import offset_settings, record_observations
     from robot_hoi.paths import TASK_CONFIG
     from robot_hoi.rl.config import PRESETS, load_train_config
     from robot_hoi.rl.models import ActorCritic

@@ -133,7 +133,7 @@ def run(args: argparse.Namespace) -> int:
             raise UserError("--cluster trains teachers; the student trains here (drop --cluster)")
         import torch
 
-        from robot_hoi.student.pipeline import run as train_student
+        from robot_hoi.student.launch import run as train_student
 
         if args.device == "auto":
             args.device = "cuda" if torch.cuda.is_available() else "cpu"

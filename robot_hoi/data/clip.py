@@ -136,6 +136,7 @@ class HOIClip:
 
 def load_clip(path: str | Path, **kwargs) -> HOIClip:
     """Load a clip: `.pt` (InterMimic, read without unpickling) or `.npz` (native). See `readers.read_clip`."""
+    # not at the top: a cycle (readers builds its HOIClips from this module)
     from robot_hoi.data.readers import read_clip
 
     return read_clip(path, **kwargs)

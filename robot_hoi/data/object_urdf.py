@@ -3,7 +3,7 @@
 Collision geometry is preferred over visual; mesh, box, cylinder and sphere elements are read, each placed by its
 `<origin xyz rpy>` and mesh `scale`. Mesh file names are resolved like a URDF loader would, relative to the URDF
 and to the folders above it (InterMimic writes `objects/<name>/<name>.obj` relative to its assets folder), with
-`package://` dropped.
+`package://` dropped. `read_mesh` reads one mesh file (objects.py reads an object's `<name>.obj` with it too).
 """
 
 from __future__ import annotations
@@ -12,6 +12,7 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import numpy as np
+import trimesh
 from scipy.spatial.transform import Rotation
 
 from robot_hoi.errors import DataError
@@ -20,6 +21,14 @@ from robot_hoi.errors import DataError
 def _floats(text: str | None, count: int, default: float) -> np.ndarray:
     values = [float(v) for v in (text or "").split()] or [default] * count
     return np.array(values if len(values) == count else values[:1] * count, dtype=np.float64)
+
+
+def read_mesh(path: Path, for_file):
+    """A mesh file as one trimesh (`for_file` is named in errors)."""
+    try:
+        return trimesh.load(path, force="mesh", process=False)
+    except Exception as exc:  # trimesh raises many types for bad files
+        raise DataError(f"{for_file}: cannot read object mesh {path}: {exc}") from exc
 
 
 def _find_mesh(filename: str, urdf: Path, folder: Path) -> Path | None:
@@ -33,10 +42,6 @@ def _find_mesh(filename: str, urdf: Path, folder: Path) -> Path | None:
 
 def _element_mesh(geometry: ET.Element, urdf: Path, folder: Path):
     """(trimesh or None, missing mesh file name or '')."""
-    import trimesh
-
-    from robot_hoi.data.objects import _read_mesh
-
     for shape in geometry:
         if shape.tag == "box":
             return trimesh.creation.box(extents=_floats(shape.get("size"), 3, 0.0)), ""
@@ -49,7 +54,7 @@ def _element_mesh(geometry: ET.Element, urdf: Path, folder: Path):
             path = _find_mesh(shape.get("filename", ""), urdf, folder)
             if path is None:
                 return None, shape.get("filename", "")
-            mesh = _read_mesh(path, urdf).copy()
+            mesh = read_mesh(path, urdf).copy()
             mesh.apply_scale(_floats(shape.get("scale"), 3, 1.0))
             return mesh, ""
     return None, ""
@@ -57,8 +62,6 @@ def _element_mesh(geometry: ET.Element, urdf: Path, folder: Path):
 
 def urdf_geometry(urdf: Path, folder: Path, for_file) -> tuple[object | None, float | None, str]:
     """(mesh in the link frame or None, mass in kg from <inertial> or None, a note on a missing mesh file)."""
-    import trimesh
-
     try:
         root = ET.parse(urdf).getroot()
     except (ET.ParseError, OSError) as exc:

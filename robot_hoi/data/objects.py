@@ -7,13 +7,16 @@ A clip's object pose maps local points to world: world = R(quat_xyzw).apply(p_lo
 
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+import trimesh
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
+from robot_hoi.data.object_urdf import read_mesh, urdf_geometry
 from robot_hoi.errors import DataError
 
 DEFAULT_NUM_SAMPLE_POINTS = 340  # what InterMimic ships per object
@@ -52,8 +55,6 @@ class ObjectAsset:
         return self.vertices.max(axis=0) - self.vertices.min(axis=0)
 
     def to_trimesh(self):
-        import trimesh
-
         return trimesh.Trimesh(vertices=self.vertices, faces=self.faces, process=False)
 
     def hull_vertices(self) -> np.ndarray:
@@ -65,8 +66,6 @@ class ObjectAsset:
     def convex_parts(self) -> list[np.ndarray]:
         """Vertices (local) of convex pieces whose union approximates the mesh (CoACD, deterministic); a convex
         mesh (a box) is one piece, its hull."""
-        import hashlib
-
         key = hashlib.sha256(np.ascontiguousarray(self.vertices).tobytes()
                              + np.ascontiguousarray(self.faces).tobytes()).hexdigest()
         if key not in _DECOMPOSITIONS:
@@ -82,8 +81,6 @@ class ObjectAsset:
     def surface_distance(self, points_local: np.ndarray) -> np.ndarray:
         """Unsigned distance (m) from local points (..., 3) to the object surface (dense samples, ~1 cm)."""
         if self._tree is None:
-            import trimesh
-
             dense, _ = trimesh.sample.sample_surface(self.to_trimesh(), DENSE_SAMPLES, seed=SAMPLE_SEED)
             self._tree = cKDTree(np.concatenate([np.asarray(dense), self.sample_points, self.vertices]))
         points_local = np.asarray(points_local, dtype=np.float64)
@@ -111,6 +108,8 @@ def check_object_collision(value: str, error: type[Exception] = DataError) -> No
 
 
 def _decompose(vertices: np.ndarray, faces: np.ndarray) -> list[np.ndarray]:
+    # here, not at the top: with coacd's library loaded first, importing onnxruntime segfaults (unless torch
+    # came before both; coacd 1.0.14, onnxruntime 1.32)
     import coacd
 
     coacd.set_log_level("error")
@@ -144,15 +143,6 @@ def _usable(mesh, where: Path, for_file) -> tuple[np.ndarray, np.ndarray]:
     return vertices, faces
 
 
-def _read_mesh(path: Path, for_file):
-    import trimesh
-
-    try:
-        return trimesh.load(path, force="mesh", process=False)
-    except Exception as exc:  # trimesh raises many types for bad files
-        raise DataError(f"{for_file}: cannot read object mesh {path}: {exc}") from exc
-
-
 def _read_samples(folder: Path, for_file) -> np.ndarray | None:
     path = folder / "sample_points.npy"
     if not path.is_file():
@@ -173,17 +163,13 @@ def load_object_asset(
     `for_file` is the clip that needs the object (named in errors). Returns the asset and notes: the first one
     says which source was used (`ObjectAsset.origin` holds the same line).
     """
-    import trimesh
-
     folder = Path(objects_dir) / name
     mesh_path = folder / f"{name}.obj"
     samples = _read_samples(folder, for_file)
     mass = None
     if mesh_path.is_file():
-        mesh, origin = _read_mesh(mesh_path, for_file), f"mesh {mesh_path}"
+        mesh, origin = read_mesh(mesh_path, for_file), f"mesh {mesh_path}"
     else:
-        from robot_hoi.data.object_urdf import urdf_geometry
-
         urdf = folder / f"{name}.urdf"
         mesh, mass, missing = urdf_geometry(urdf, folder, for_file) if urdf.is_file() else (None, None, "")
         if mesh is not None:
@@ -238,8 +224,6 @@ def box_asset(
     size_xyz: tuple[float, float, float], *, name: str = "box", mass_kg: float | None = None, seed: int = 0
 ) -> ObjectAsset:
     """A procedural box centred on its local origin, with DEFAULT_NUM_SAMPLE_POINTS surface samples."""
-    import trimesh
-
     mesh = trimesh.creation.box(extents=size_xyz)
     points, _ = trimesh.sample.sample_surface(mesh, DEFAULT_NUM_SAMPLE_POINTS, seed=seed)
     return ObjectAsset(

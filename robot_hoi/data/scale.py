@@ -10,6 +10,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
+import yaml
 
 from robot_hoi.data.clip import HOIClip
 from robot_hoi.data.kinematics import bone_offsets, estimate_height_from_offsets
@@ -37,8 +38,6 @@ def subject_height(subject: str | None, body_pos: np.ndarray, body_quat_xyzw: np
 
 def robot_height_from_embodiment(name_or_path: str | Path = DEFAULT_EMBODIMENT) -> float:
     """`robot_height` from configs/embodiments/<name>.yaml (or a YAML path); 1.32 m when the key is absent."""
-    import yaml
-
     path = Path(name_or_path)
     if path.suffix not in (".yaml", ".yml"):
         path = CONFIGS_DIR / "embodiments" / f"{name_or_path}.yaml"

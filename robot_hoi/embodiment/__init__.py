@@ -12,6 +12,8 @@ mujoco is imported lazily so `load_embodiment` stays light.
 
 from __future__ import annotations
 
+import importlib
+
 from robot_hoi.embodiment.collision import ROBOT_COLLISION_BITS, WORLD_COLLISION_BITS, set_world_collision
 from robot_hoi.embodiment.config import (
     ActuatorCfg,
@@ -48,7 +50,5 @@ _LAZY = {
 
 def __getattr__(name: str):
     if name in _LAZY:
-        import importlib
-
         return getattr(importlib.import_module(_LAZY[name]), name)
     raise AttributeError(f"module 'robot_hoi.embodiment' has no attribute {name!r}")

@@ -10,6 +10,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
+import imageio.v2 as imageio
+import mujoco
 import numpy as np
 from scipy.spatial.transform import Rotation
 
@@ -17,6 +19,8 @@ from deploy.atomic import atomic_path
 from robot_hoi.data.clip import HOIClip
 from robot_hoi.data.layout import BODY_NAMES, BODY_PARENTS
 from robot_hoi.data.objects import to_world
+from robot_hoi.embodiment import build_model, load_embodiment
+from robot_hoi.embodiment.mjcf import DEFAULT_KEYFRAME
 from robot_hoi.errors import UserError
 
 SIDE_COLOURS = {"L_": "tab:blue", "R_": "tab:red"}
@@ -36,11 +40,6 @@ class RobotSkeleton:
 
 
 def robot_skeleton(embodiment: str) -> RobotSkeleton:
-    import mujoco
-
-    from robot_hoi.embodiment import build_model, load_embodiment
-    from robot_hoi.embodiment.mjcf import DEFAULT_KEYFRAME
-
     cfg = load_embodiment(embodiment)
     model = build_model(cfg)
     data = mujoco.MjData(model)
@@ -127,7 +126,7 @@ def render_view(
     video_fps: float = 15.0,
 ) -> Path:
     """Write a PNG strip of keyframes or an MP4 of the clip. Returns the path."""
-    import matplotlib
+    import matplotlib  # here: pyplot (~0.5 s) after choosing the headless Agg backend
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -154,8 +153,7 @@ def render_view(
 
 
 def _render_video(clip: HOIClip, out: Path, skeleton, side_offset: float, video_fps: float) -> Path:
-    import imageio.v2 as imageio
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # after render_view's matplotlib.use("Agg")
 
     stride = max(1, int(round(clip.fps / video_fps)))
     fig = plt.figure(figsize=(6.4, 4.8), dpi=100)

@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 import yaml
 
+from robot_hoi.embodiment.g1_spec import g1_inspire
 from robot_hoi.embodiment.spec_types import RobotDescription
 from robot_hoi.errors import UserError
 from robot_hoi.paths import CONFIGS_DIR
@@ -131,8 +132,6 @@ class EmbodimentConfig:
 
 
 def _descriptions() -> dict[str, Callable[[], RobotDescription]]:
-    from robot_hoi.embodiment.g1_spec import g1_inspire
-
     return {"g1_inspire": g1_inspire}
 
 

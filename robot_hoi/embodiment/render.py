@@ -11,7 +11,11 @@ import os
 import sys
 from pathlib import Path
 
+import imageio.v3 as iio
+import numpy as np
+
 from deploy.atomic import atomic_path
+from robot_hoi.embodiment.collision import COLLISION_GROUP, VISUAL_MESH_GROUP
 from robot_hoi.errors import UserError
 
 NO_DISPLAY_HINT = (
@@ -38,10 +42,6 @@ def choose_gl_backend() -> str:
 
 def _show_meshes_not_collision(model) -> None:
     """With Unitree meshes loaded, move the collision primitives to group 3 (hidden; key 3 shows them)."""
-    import numpy as np
-
-    from robot_hoi.embodiment.collision import COLLISION_GROUP, VISUAL_MESH_GROUP
-
     if (model.geom_group == VISUAL_MESH_GROUP).any():
         robot = (model.geom_group == COLLISION_GROUP) & (model.geom_bodyid > 0)
         model.geom_group[robot] = np.int32(3)
@@ -49,6 +49,7 @@ def _show_meshes_not_collision(model) -> None:
 
 def prepared_model(cfg, *, meshes: bool, fixed_base: bool, self_collision: bool | None = None):
     """Model + data at the default keyframe, for looking at."""
+    # mujoco only here and below, after choose_gl_backend: it reads MUJOCO_GL when first imported
     import mujoco
 
     from robot_hoi.embodiment.mjcf import DEFAULT_KEYFRAME, build_model
@@ -65,7 +66,7 @@ def view(cfg, *, meshes: bool, fixed_base: bool, self_collision: bool | None = N
     """Blocking interactive viewer (physics runs; the PD holds the default pose)."""
     if not has_display():
         raise UserError(NO_DISPLAY_HINT)
-    import mujoco.viewer
+    import mujoco.viewer  # GLFW: only with a display
 
     model, data = prepared_model(cfg, meshes=meshes, fixed_base=fixed_base, self_collision=self_collision)
     mujoco.viewer.launch(model, data)
@@ -84,8 +85,7 @@ def render_png(
 ) -> Path:
     """Render the default pose to a PNG with mujoco.Renderer (offscreen)."""
     backend = choose_gl_backend()
-    import imageio.v3 as iio
-    import mujoco
+    import mujoco  # after choose_gl_backend
 
     model, data = prepared_model(cfg, meshes=meshes, fixed_base=False)
     model.vis.global_.offwidth = max(model.vis.global_.offwidth, width)

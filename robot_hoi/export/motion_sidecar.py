@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from deploy.motion import ReferenceMotion as DeployMotion
+
 
 def deploy_motion(reference, source: str = "<export>"):
     """robot_hoi ReferenceMotion (the env's robot-space reference) -> deploy.motion.ReferenceMotion."""
-    from deploy.motion import ReferenceMotion as DeployMotion
-
     as_np = lambda t: np.asarray(t.detach().cpu().numpy(), dtype=np.float64)  # noqa: E731
     qpos = as_np(reference.robot_qpos)
     return DeployMotion(

@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 import onnx
+import onnxruntime as ort
 import torch
 
 from deploy.atomic import atomic_write_bytes
@@ -58,8 +59,6 @@ def to_onnx_bytes(policy: torch.nn.Module, obs_dim: int, metadata: dict[str, str
 
 
 def ort_session(data: bytes):
-    import onnxruntime as ort
-
     options = ort.SessionOptions()
     options.intra_op_num_threads = 1
     options.inter_op_num_threads = 1

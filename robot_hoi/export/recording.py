@@ -3,6 +3,9 @@ policy meets, for verifying the ONNX file against torch."""
 
 from __future__ import annotations
 
+import numpy as np
+import torch
+
 
 def offset_settings(env_cfg) -> dict:
     """The contract's action-offset keys for a training env: its mode ("reference" or "fixed" = the default pose),
@@ -14,9 +17,6 @@ def offset_settings(env_cfg) -> dict:
 
 def record_observations(env, policy_fn, group: str, count: int):
     """Observations of `group` met while running `policy_fn` in `env` (for export verification)."""
-    import numpy as np
-    import torch
-
     recorded = []
     obs = env.reset()
     with torch.no_grad():

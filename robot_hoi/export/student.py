@@ -9,29 +9,27 @@ joint angles, the PD targets of a zero action (action_offset "reference"), must 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 from pathlib import Path
 
+import numpy as np
+
+from deploy.motion import file_sha256
+from robot_hoi.embodiment import build_model, load_embodiment
 from robot_hoi.errors import UserError
+from robot_hoi.export.metadata import actuator_limits, clip_identity, policy_metadata
+from robot_hoi.export.motion_sidecar import deploy_motion
+from robot_hoi.export.onnx_export import export_policy
+from robot_hoi.export.recording import offset_settings, record_observations
 from robot_hoi.paths import EXPORT_DIR
+from robot_hoi.student.checkpoint import load_student
+from robot_hoi.student.reference_distill import LIMIT_MARGIN
+from robot_hoi.student.task import build_task_env, read_student_task, task_folder
+from robot_hoi.tasks.interaction.env_cfg import saved_env_cfg
+from robot_hoi.tasks.interaction.mdp.observations import student_observation_spec
 
 
 def run_student_export(args: argparse.Namespace, ckpt: Path) -> int:
-    import dataclasses
-
-    import numpy as np
-
-    from deploy.motion import file_sha256
-    from robot_hoi.embodiment import build_model, load_embodiment
-    from robot_hoi.export.metadata import actuator_limits, clip_identity, policy_metadata
-    from robot_hoi.export.motion_sidecar import deploy_motion
-    from robot_hoi.export.onnx_export import export_policy
-    from robot_hoi.export.recording import offset_settings, record_observations
-    from robot_hoi.student.checkpoint import load_student
-    from robot_hoi.student.reference_distill import LIMIT_MARGIN
-    from robot_hoi.student.task import read_student_task, task_folder
-    from robot_hoi.tasks.interaction.env_cfg import saved_env_cfg
-    from robot_hoi.tasks.interaction.mdp.observations import student_observation_spec
-
     model, cfg, data = load_student(ckpt)
     if model.layout.obs_dim != data["dims"]["actor_obs"] or cfg.runner.actor_obs_groups != ["student"]:
         raise UserError(f"{ckpt}: this student also reads {cfg.runner.actor_obs_groups[1:]} (the SkillMimic-V2 "
@@ -43,8 +41,6 @@ def run_student_export(args: argparse.Namespace, ckpt: Path) -> int:
     env_cfg = saved_env_cfg(task["env"], f"{folder}/task.json")
     env_cfg.num_envs = 16
     env_cfg.psi.enabled = False
-    from robot_hoi.student.task import build_task_env
-
     env, clips, sources = build_task_env(task, folder, env_cfg)
     spec = student_observation_spec(env)
     if env.obs_dims["student"] != model.num_actor_obs or spec != data["student"].get("obs_spec", spec):
@@ -87,8 +83,6 @@ def run_student_export(args: argparse.Namespace, ckpt: Path) -> int:
 
 def reference_outside_limits(joint_pos, lower, upper) -> str:
     """'' when every reference joint angle lies inside [lower, upper], else which joints leave them and by how much."""
-    import numpy as np
-
     excess = np.maximum(lower - joint_pos, joint_pos - upper)  # (T, A), > 0 outside
     bad = np.flatnonzero((excess > 0).any(axis=0))
     if bad.size == 0:

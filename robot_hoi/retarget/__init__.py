@@ -12,6 +12,8 @@ Attributes load lazily, so `robot-hoi --help` does not import mujoco.
 
 from __future__ import annotations
 
+import importlib
+
 _LAZY = {
     "RobotTargets": "robot_hoi.retarget.targets",
     "TargetMapping": "robot_hoi.retarget.targets",
@@ -34,7 +36,5 @@ __all__ = sorted(_LAZY)
 
 def __getattr__(name: str):
     if name in _LAZY:
-        import importlib
-
         return getattr(importlib.import_module(_LAZY[name]), name)
     raise AttributeError(f"module 'robot_hoi.retarget' has no attribute {name!r}")

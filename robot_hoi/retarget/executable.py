@@ -24,6 +24,7 @@ import mujoco
 import numpy as np
 from scipy.ndimage import gaussian_filter1d
 
+from robot_hoi.errors import UserError
 from robot_hoi.retarget.kinematics import joint_ids
 
 
@@ -80,8 +81,6 @@ SQUEEZE_TOWARD = ("other_hand", "surface")
 
 def check_squeeze_toward(value: str, name: str) -> str:
     """A user-given squeeze direction (`name`: the flag or config key it came from)."""
-    from robot_hoi.errors import UserError
-
     if value not in SQUEEZE_TOWARD:
         raise UserError(f"{name} must be one of {', '.join(SQUEEZE_TOWARD)}, got {value!r}")
     return value
@@ -89,8 +88,6 @@ def check_squeeze_toward(value: str, name: str) -> str:
 
 def check_squeeze_depth(value: float, name: str) -> float:
     """A user-given squeeze depth in metres (`name`: the flag or config key it came from)."""
-    from robot_hoi.errors import UserError
-
     if not 0.0 <= value <= 0.3:
         raise UserError(f"{name} must be within [0, 0.3] m (how far past the surface the hands squeeze), got {value}")
     return value

@@ -12,6 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import trimesh
 from scipy.spatial import ConvexHull, QhullError
 
 from robot_hoi.retarget.object_contact import HullPlanes
@@ -153,6 +154,4 @@ def hull_mass(vertices: np.ndarray, faces: np.ndarray, density: float) -> float:
 
 
 def _solid_hull(vertices: np.ndarray, faces: np.ndarray):
-    import trimesh
-
     return trimesh.Trimesh(vertices=vertices, faces=faces, process=True).convex_hull

@@ -22,6 +22,7 @@ import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
 from robot_hoi.retarget.ik import sole_points
+from robot_hoi.retarget.targets import TargetMapping, planted
 
 
 def foot_sole_world(model: mujoco.MjModel, qpos: np.ndarray, foot_bodies: list[str]) -> dict[str, np.ndarray]:
@@ -107,8 +108,6 @@ def kinematic_feasibility(model: mujoco.MjModel, motion, foot_bodies: list[str],
                           self_collision_model: mujoco.MjModel | None = None) -> dict:
     """Foot slide, CoM-outside-support share, joint speeds and (given `self_collision_model`) self-penetration of a
     RobotMotion (see the module docstring)."""
-    from robot_hoi.retarget.targets import TargetMapping, planted
-
     soles = foot_sole_world(model, motion.qpos, foot_bodies)
     names = list(motion.link_names)
     rule = TargetMapping()

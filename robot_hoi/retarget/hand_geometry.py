@@ -25,7 +25,13 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from robot_hoi.retarget.faces import Face
-from robot_hoi.retarget.kinematics import apply_joint_couplings, joint_ids, link_positions, resolve_links
+from robot_hoi.retarget.kinematics import (
+    apply_joint_couplings,
+    default_qpos,
+    joint_ids,
+    link_positions,
+    resolve_links,
+)
 from robot_hoi.retarget.object_contact import HullPlanes, hand_probe_points
 from robot_hoi.retarget.targets import hand_side, link_group
 
@@ -111,8 +117,6 @@ class HandGeometry:
 def hand_geometry(model: mujoco.MjModel, cfg, side: str, link_names, human_names,
                   closures: np.ndarray | None = None) -> HandGeometry:
     """HandGeometry of one side of an embodiment (`cfg.hands[side]`) for the targets' hand links."""
-    from robot_hoi.retarget.pipeline import default_qpos
-
     closures = np.linspace(0.0, 1.0, 21) if closures is None else np.asarray(closures, dtype=np.float64)
     pairs = list(zip(link_names, human_names, strict=True))
     wrist = next(r for r, h in pairs if hand_side(h) == side and link_group(h) == "wrists")

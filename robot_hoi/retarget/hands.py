@@ -13,6 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from robot_hoi.errors import UserError
+
 
 @dataclass(frozen=True)
 class GraspRule:
@@ -23,8 +25,6 @@ class GraspRule:
 
 def check_closure(value: float, name: str) -> float:
     """A user-given finger closure (`name`: the flag or config key it came from), which must be a stroke fraction."""
-    from robot_hoi.errors import UserError
-
     if not 0.0 <= value <= 1.0:
         raise UserError(f"{name} must be within [0, 1] (a fraction of the finger stroke), got {value}")
     return value

@@ -27,6 +27,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
+from robot_hoi.errors import DataError
 from robot_hoi.retarget.kinematics import (
     apply_joint_couplings,
     forward,
@@ -76,8 +77,6 @@ class IKSettings:
 
     def __post_init__(self) -> None:
         if self.solver not in IK_SOLVERS:
-            from robot_hoi.errors import DataError
-
             raise DataError(f"the IK solver must be one of {', '.join(IK_SOLVERS)}, not {self.solver!r}")
 
 

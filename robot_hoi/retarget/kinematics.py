@@ -127,3 +127,16 @@ def apply_joint_couplings(model: mujoco.MjModel, qpos: np.ndarray) -> None:
         a2 = model.jnt_qposadr[j2]
         d = qpos[a2] - model.qpos0[a2]
         qpos[a1] = model.qpos0[a1] + coef[0] + d * (coef[1] + d * (coef[2] + d * (coef[3] + d * coef[4])))
+
+
+def default_qpos(model: mujoco.MjModel, cfg) -> np.ndarray:
+    """The config's default stand: pelvis at spawn_height, upright, actuated joints at their defaults."""
+    q = model.qpos0.copy()
+    free = free_joint_id(model)
+    if free is not None:
+        adr = model.jnt_qposadr[free]
+        q[adr:adr + 7] = [0.0, 0.0, cfg.spawn_height, 1.0, 0.0, 0.0, 0.0]
+    adrs = model.jnt_qposadr[joint_ids(model, cfg.actuator_names)]
+    q[adrs] = cfg.default_pos
+    apply_joint_couplings(model, q)
+    return q

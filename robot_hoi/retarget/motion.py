@@ -12,6 +12,7 @@ import json
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import mujoco
 import numpy as np
 
 from deploy.atomic import atomic_write_bytes, atomic_write_text
@@ -147,8 +148,6 @@ class RobotMotion:
 
 def finite_difference_qvel(model, qpos: np.ndarray, fps: float) -> np.ndarray:
     """(T, nq) -> (T, nv): central differences on the configuration manifold (mj_differentiatePos)."""
-    import mujoco
-
     T = qpos.shape[0]
     qvel = np.zeros((T, model.nv))
     if T < 2:

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import mujoco
 import numpy as np
 from scipy.spatial import ConvexHull
 
@@ -118,8 +119,6 @@ def hand_probe_points(model, root_bodies, arm_roots=()) -> ProbePoints:
     Capsules give their two end centres and radius, spheres their centre, boxes their 8 corners (radius 0) and
     centre (radius = smallest half size). Geom frames are fixed in their body, so the points are too.
     """
-    import mujoco
-
     hand_bodies = [b for root in root_bodies for b in subtree(model, int(root))]
     arm_bodies = [b for root in arm_roots for b in subtree(model, int(root)) if b not in hand_bodies]
     bodies, local, radius = [], [], []

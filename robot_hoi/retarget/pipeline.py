@@ -9,6 +9,8 @@ import mujoco
 import numpy as np
 from scipy.ndimage import gaussian_filter1d
 
+from robot_hoi.data.contacts import hand_contact_need
+from robot_hoi.embodiment import build_model
 from robot_hoi.retarget.executable import (
     ExecutableSettings,
     limit_speed,
@@ -22,8 +24,7 @@ from robot_hoi.retarget.hand_geometry import hand_geometry
 from robot_hoi.retarget.hands import GraspRule, HandJoints, closure_profile, finger_angles, holding
 from robot_hoi.retarget.ik import IKResult, IKSettings, IKSolver
 from robot_hoi.retarget.kinematics import (
-    apply_joint_couplings,
-    free_joint_id,
+    default_qpos,
     joint_ids,
     link_positions,
     resolve_links,
@@ -68,19 +69,6 @@ class RetargetResult:
 
 LIFTED_M = 0.02  # object this far above its lowest height counts as carried (its weight on the hands)
 DYNAMICS_SIGMA_S = 0.05  # s, Gaussian low-pass of the reference velocity and acceleration for compensate_dynamics
-
-
-def default_qpos(model: mujoco.MjModel, cfg) -> np.ndarray:
-    """The config's default stand: pelvis at spawn_height, upright, actuated joints at their defaults."""
-    q = model.qpos0.copy()
-    free = free_joint_id(model)
-    if free is not None:
-        adr = model.jnt_qposadr[free]
-        q[adr:adr + 7] = [0.0, 0.0, cfg.spawn_height, 1.0, 0.0, 0.0, 0.0]
-    adrs = model.jnt_qposadr[joint_ids(model, cfg.actuator_names)]
-    q[adrs] = cfg.default_pos
-    apply_joint_couplings(model, q)
-    return q
 
 
 def hand_joints(cfg) -> list[HandJoints]:
@@ -331,8 +319,6 @@ def robot_hand_lengths(model: mujoco.MjModel, link_map: dict[str, str]) -> dict[
 def clip_grasps(model: mujoco.MjModel, cfg, clip, targets: RobotTargets, options: RetargetOptions) -> GraspPlan:
     """The grips (grasp.py) for a clip's targets: its held segments, the convex pieces the simulation collides
     with and their centre of mass."""
-    from robot_hoi.data.contacts import hand_contact_need
-
     pieces = clip.object.collision_pieces(options.mapping.object_collision)
     geometries = {side: hand_geometry(model, cfg, side, targets.link_names, targets.human_names)
                   for side in cfg.hands}
@@ -350,8 +336,6 @@ def retarget_clip(
     """HOIClip + embodiment config -> RetargetResult (motion, targets, IK details)."""
     options = options or RetargetOptions()
     if model is None:
-        from robot_hoi.embodiment import build_model
-
         model = build_model(cfg)
     targets = targets_from_clip(clip, cfg, scale=scale, mapping=options.mapping,
                                 hand_length=robot_hand_lengths(model, cfg.link_map))

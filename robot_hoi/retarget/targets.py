@@ -40,6 +40,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from robot_hoi.data.layout import BODY_INDEX
 from robot_hoi.data.objects import check_object_collision
 from robot_hoi.errors import DataError
 from robot_hoi.retarget.object_contact import HullPlanes
@@ -320,8 +321,6 @@ def fit_hand_size(body_pos: np.ndarray, human_pos: np.ndarray, human_names: list
     """human_pos (T, L, 3) with each hand's mapped links (wrist, fingertips) scaled about that hand's palm centre
     (the wrist-to-middle-knuckle midpoint) by robot / human wrist-to-fingertip length (`hand_length[side]`, side
     as `hand_side` names it, over the clip's mean distance from the wrist to the mapped fingertips)."""
-    from robot_hoi.data.layout import BODY_INDEX
-
     out = human_pos.copy()
     for side, length in hand_length.items():
         links = [i for i, n in enumerate(human_names) if hand_side(n) == side]
@@ -345,8 +344,6 @@ def targets_from_clip(clip, cfg, scale: float | None = None, mapping: TargetMapp
     `cfg` needs `robot_height` (m) and `link_map` {robot body/site: human body name}. `hand_length`: the robot's
     mean wrist-to-fingertip distance per side ("left", "right"), for `mapping.hand_size_fit` (off where not given).
     """
-    from robot_hoi.data.layout import BODY_INDEX
-
     mapping = mapping or TargetMapping()
     link_map = dict(cfg.link_map)
     unknown = [h for h in link_map.values() if h not in BODY_INDEX]

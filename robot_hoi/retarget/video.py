@@ -13,7 +13,9 @@ import subprocess
 import sys
 from pathlib import Path
 
+import imageio.v2 as imageio
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from deploy.atomic import atomic_path
 
@@ -49,6 +51,7 @@ def choose_gl_backend() -> str | None:
 def _render_model(cfg, object_asset, meshes: bool):
     """Robot (collision primitives; Unitree's visual meshes too when `meshes` and present), a floor, and the
     object as a mocap mesh body."""
+    # mujoco here and below, not at the top: after choose_gl_backend (see the module docstring)
     import mujoco
 
     from robot_hoi.embodiment import build_robot_spec
@@ -67,7 +70,7 @@ def _render_model(cfg, object_asset, meshes: bool):
 
 def target_bones(model, link_names) -> list[tuple[int, int]]:
     """(child, parent) pairs of targets whose links are nearest relatives in the robot's body tree."""
-    import mujoco
+    import mujoco  # after choose_gl_backend
 
     def body_of(name: str) -> int:
         body = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, name)
@@ -89,6 +92,7 @@ def render_mujoco(
     motion, cfg, path: Path, object_asset=None, size=(640, 480), stride: int = 1, pretty: bool = False
 ) -> None:
     """pretty: Unitree meshes, shadows and reflections (~0.4 s a frame with software GL, vs ~0.04 s)."""
+    # sim.video imports mujoco: after choose_gl_backend
     from robot_hoi.sim.video import StateRenderer, add_ghost_skeleton, write_mp4
 
     model = _render_model(cfg, object_asset, meshes=pretty)
@@ -106,13 +110,11 @@ def render_mujoco(
 
 def render_matplotlib(motion, model, path: Path, object_points_local=None, size=(640, 480), stride: int = 1) -> None:
     """Stick figure: every body joined to its parent, targets as red dots, object samples as orange dots."""
-    import imageio.v2 as imageio
-    import matplotlib
+    import matplotlib  # only for this fallback (pyplot ~0.5 s), after choosing the headless Agg backend
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    import mujoco
-    from scipy.spatial.transform import Rotation
+    import mujoco  # after choose_gl_backend
 
     data = mujoco.MjData(model)
     parents = model.body_parentid

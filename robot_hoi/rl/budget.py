@@ -10,7 +10,7 @@ Unit case matters: "m" is minutes, "M" is millions. A bare number is rejected as
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from robot_hoi.errors import UserError
 
@@ -45,6 +45,15 @@ class Budget:
         if self.iterations is not None:
             parts.append(iterations / self.iterations)
         return min(1.0, max(parts))
+
+    def scaled(self, fraction: float) -> Budget:
+        """Each limit times `fraction` (at least 1 s, 1 sample, 1 iteration)."""
+
+        def part(v):
+            return None if v is None else type(v)(max(v * fraction, 1))
+
+        return replace(self, wall_seconds=part(self.wall_seconds), samples=part(self.samples),
+                       iterations=part(self.iterations))
 
     def exhausted(self, elapsed_s: float, samples: int, iterations: int) -> bool:
         return self.fraction_done(elapsed_s, samples, iterations) >= 1.0

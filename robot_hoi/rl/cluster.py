@@ -69,7 +69,7 @@ class RayOptions:
 def teacher_task(job: TeacherJob, clips: list, storage: str, seed_archive: bytes | None = None,
                  mirror=None) -> dict[str, Any]:
     """Body of one Ray task: train the group where the driver can get at it (see the module docstring)."""
-    import ray
+    import ray  # optional: the cluster extra (pip install -e .[cluster])
 
     clips = copy.deepcopy(clips)  # arguments arrive as read-only zero-copy arrays from the object store
     try:
@@ -123,7 +123,7 @@ def _prepare_staging(staging: Path, token: str, seed_archive: bytes | None, mirr
     """Keep a staging folder this invocation already trained in (a retry on the same node); else start it from
     the driver's mirror of this invocation's checkpoints (a retry on another node), else from the driver's copy
     (--resume), else empty."""
-    import ray
+    import ray  # optional: the cluster extra (pip install -e .[cluster])
 
     state = read_job_state(staging)
     if state is not None and state["run_token"] == token:
@@ -235,7 +235,7 @@ def run_teachers(jobs: list[TeacherJob], clips: list[list], options: RayOptions,
     Returns (summaries of the teachers that finished, {group: error} of those that failed after all retries).
     Uses the Ray instance this process is connected to, else connects to options.address or starts a local one
     (and shuts it down at the end)."""
-    import ray
+    import ray  # optional: the cluster extra (pip install -e .[cluster])
 
     if options.storage not in STORAGE_MODES:
         raise UserError(f"--storage must be one of {', '.join(STORAGE_MODES)}, not {options.storage!r}")
@@ -290,7 +290,7 @@ def run_teachers(jobs: list[TeacherJob], clips: list[list], options: RayOptions,
 
 def _start_mirror(out_dir: Path, token: str):
     """The CheckpointMirror actor on this (the driver's) node; None under Ray Client (the driver is off-cluster)."""
-    import ray
+    import ray  # optional: the cluster extra (pip install -e .[cluster])
     from ray.util.scheduling_strategies import NodeAffinitySchedulingStrategy
 
     if ray.util.client.ray.is_connected():
@@ -312,7 +312,7 @@ def _for_worker(job: TeacherJob, options: RayOptions) -> TeacherJob:
 
 
 def _gather(pending: dict, total: int, log) -> tuple[dict[str, dict], dict[str, str]]:
-    import ray
+    import ray  # optional: the cluster extra (pip install -e .[cluster])
 
     summaries: dict[str, dict] = {}
     failures: dict[str, str] = {}

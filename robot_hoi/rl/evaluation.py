@@ -24,10 +24,11 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
-import torch
-
 from robot_hoi.errors import UserError
+from robot_hoi.paths import CONFIGS_DIR
+from robot_hoi.tasks.interaction.env_cfg import RandomizationCfg, split_overrides
 from robot_hoi.termination import Thresholds
+from robot_hoi.utils.config import apply_overrides, load_yaml_dataclass
 
 DEFAULT_PROTOCOL = "randomized"
 DEFAULT_EPISODES = 32
@@ -57,16 +58,11 @@ class EvalProtocol:
 
 
 def protocol_names() -> list[str]:
-    from robot_hoi.paths import CONFIGS_DIR
-
     return sorted(p.stem for p in (CONFIGS_DIR / "eval").glob("*.yaml"))
 
 
 def load_protocol(name: str) -> tuple[str, EvalProtocol]:
     """(name, protocol) of configs/eval/<name>.yaml or of a YAML path."""
-    from robot_hoi.paths import CONFIGS_DIR
-    from robot_hoi.utils.config import load_yaml_dataclass
-
     path = Path(name) if name.endswith((".yaml", ".yml")) else CONFIGS_DIR / "eval" / f"{name}.yaml"
     if not path.is_file():
         raise UserError(f"{path}: no such evaluation protocol (choose from {', '.join(protocol_names())} or a "
@@ -86,8 +82,6 @@ def intermimic_thresholds(ours: Thresholds) -> Thresholds:
 def evaluation_settings(env_cfg, episodes: int, seed: int, protocol: EvalProtocol | None = None) -> None:
     """Turn a training env config into an evaluation one (in place): `episodes` stand starts drawn by `protocol`
     (None: the one deterministic stand), no PSI, no assist wrenches, no randomisation but the protocol's mass."""
-    from robot_hoi.tasks.interaction.env_cfg import RandomizationCfg
-
     p = protocol or EvalProtocol()
     env_cfg.num_envs = episodes
     env_cfg.seed = seed
@@ -103,9 +97,6 @@ def evaluation_settings(env_cfg, episodes: int, seed: int, protocol: EvalProtoco
 def apply_env_overrides(env_cfg, overrides: list[str]):
     """`--set` values for the environment: "env.key=value" or "key=value" (InteractionEnvCfg keys), and
     "retarget.key=value" (its retarget: block)."""
-    from robot_hoi.tasks.interaction.env_cfg import split_overrides
-    from robot_hoi.utils.config import apply_overrides
-
     items, _ = split_overrides(overrides, bare=True)
     return apply_overrides(env_cfg, items, "--set") if items else env_cfg
 
@@ -116,7 +107,10 @@ def evaluate(env, model, stochastic: bool = False) -> dict[str, Any]:
 
     Actions are the policy mean, or samples of the policy's Gaussian with `stochastic` (seed torch first). The
     model runs where its parameters are, the env where its physics is: observations and actions cross over."""
-    from robot_hoi.sim.device import module_device
+    # torch loads here, not at the top: `robot-hoi --help` imports this module (commands/eval.py's defaults)
+    import torch
+
+    from robot_hoi.sim.device import module_device  # imports torch
 
     policy_device = module_device(model, env.device)
     obs = env.reset()
@@ -206,7 +200,7 @@ def mean_interval(values: list[float], confidence: float = 0.95) -> dict[str, fl
     mean = sum(values) / n if n else float("nan")
     if n < 2:
         return {"mean": mean, "lo": None, "hi": None, "n": n}
-    from scipy.stats import t
+    from scipy.stats import t  # ~0.5 s to import, and --help imports this module (see evaluate)
 
     sd = math.sqrt(sum((v - mean) ** 2 for v in values) / (n - 1))
     half = t.ppf(0.5 + confidence / 2, n - 1) * sd / math.sqrt(n)

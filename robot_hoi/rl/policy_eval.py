@@ -5,13 +5,27 @@ is built the same way by robot_hoi.student.eval_checkpoint)."""
 from __future__ import annotations
 
 import datetime
+import os
 import platform
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import torch
+
+from robot_hoi.embodiment import load_embodiment
+from robot_hoi.errors import UserError
+from robot_hoi.paths import TASK_CONFIG
 from robot_hoi.rl import evaluation
+from robot_hoi.rl.checkpoint import load_policy, read_checkpoint, resolve_checkpoint
+from robot_hoi.rl.config import PRESETS, load_train_config
 from robot_hoi.rl.evaluation import EvalProtocol
+from robot_hoi.rl.models import ActorCritic
+from robot_hoi.rl.recipe import RECORD_FILE
+from robot_hoi.sim.device import resolve_env_cfg
+from robot_hoi.tasks.interaction import factory
+from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg, saved_env_cfg
+from robot_hoi.utils.config import load_yaml_dataclass
 
 RECORD_SCHEMA = "robot-hoi.eval/1"
 
@@ -31,8 +45,6 @@ class EvalRequest:
 
 
 def resolve_protocol(request: EvalRequest) -> tuple[str, EvalProtocol]:
-    from robot_hoi.errors import UserError
-
     if request.episodes < 1:
         raise UserError(f"--episodes must be at least 1, got {request.episodes}")
     name, protocol = evaluation.load_protocol(request.protocol)
@@ -50,26 +62,12 @@ def evaluate_teacher(request: EvalRequest) -> dict[str, Any]:
     name, protocol = resolve_protocol(request)
     ckpt = None
     if request.checkpoint != "untrained":
-        from robot_hoi.rl.checkpoint import resolve_checkpoint
-
         ckpt = resolve_checkpoint(request.checkpoint)
     return make_record(request, name, protocol, "teacher" if ckpt else "untrained", ckpt,
                        _evaluate_teacher(request, protocol, ckpt))
 
 
 def _evaluate_teacher(request: EvalRequest, protocol: EvalProtocol, ckpt: Path | None) -> dict[str, Any]:
-    import torch
-
-    from robot_hoi.embodiment import load_embodiment
-    from robot_hoi.paths import TASK_CONFIG
-    from robot_hoi.rl.checkpoint import load_policy
-    from robot_hoi.rl.config import PRESETS, load_train_config
-    from robot_hoi.rl.models import ActorCritic
-    from robot_hoi.sim.device import resolve_env_cfg
-    from robot_hoi.tasks.interaction import factory
-    from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg, saved_env_cfg
-    from robot_hoi.utils.config import load_yaml_dataclass
-
     model = None
     task = None
     if ckpt is not None:
@@ -120,9 +118,6 @@ def _training_facts(ckpt: Path | None) -> dict[str, Any]:
     """What the checkpoint says of its training: iteration, samples, training time, the run's recipe."""
     if ckpt is None:
         return {}
-    from robot_hoi.rl.checkpoint import read_checkpoint
-    from robot_hoi.rl.recipe import RECORD_FILE
-
     data = read_checkpoint(ckpt)
     facts = {"iteration": int(data.get("iteration", 0)), "samples": int(data.get("total_samples", 0)),
              "train_time_s": round(float(data.get("total_time_s", 0.0)), 1)}
@@ -135,6 +130,4 @@ def _training_facts(ckpt: Path | None) -> dict[str, Any]:
 
 
 def _cpu_count() -> int:
-    import os
-
     return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)

@@ -10,6 +10,15 @@ import sys
 import time
 from typing import TextIO
 
+from rich.progress import (
+    BarColumn,
+    Progress,
+    TaskProgressColumn,
+    TextColumn,
+    TimeElapsedColumn,
+    TimeRemainingColumn,
+)
+
 PLAIN_INTERVAL_S = 30.0  # one line at most this often (and always for the first and the last iteration)
 
 
@@ -65,15 +74,6 @@ def training_progress(enabled: bool, stream: TextIO | None = None):
     """rich's bar when `stream` (stdout) is a terminal, else PlainProgress."""
     stream = stream or sys.stdout
     if stream.isatty():
-        from rich.progress import (
-            BarColumn,
-            Progress,
-            TaskProgressColumn,
-            TextColumn,
-            TimeElapsedColumn,
-            TimeRemainingColumn,
-        )
-
         return Progress(TextColumn("[bold]{task.description}"), BarColumn(), TaskProgressColumn(),
                         TimeElapsedColumn(), TextColumn("ETA"), TimeRemainingColumn(), disable=not enabled,
                         transient=False)

@@ -26,9 +26,27 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
+import torch
+from rich import box
+from rich.table import Table
+
 from deploy.atomic import atomic_write_text
+from robot_hoi.embodiment import load_embodiment
 from robot_hoi.rl.budget import Budget
-from robot_hoi.rl.checkpoint import latest_checkpoint
+from robot_hoi.rl.checkpoint import BEST_CHECKPOINT, latest_checkpoint, load_model_state, read_checkpoint
+from robot_hoi.rl.eval_curve import EVAL_CURVE_FILE
+from robot_hoi.rl.evaluation import (
+    DEFAULT_PROTOCOL,
+    VALIDATION_SEED,
+    evaluate,
+    load_protocol,
+    protocol_env_cfg,
+    summarise,
+)
+from robot_hoi.rl.runner import OnPolicyRunner
+from robot_hoi.sim.device import check_gpu_memory, policy_device, resolve_env_cfg
+from robot_hoi.tasks.interaction import factory
+from robot_hoi.utils.console import table_console
 
 JOB_STATE_FILE = "job_state.json"
 EVAL_FILE = "eval.json"
@@ -97,16 +115,6 @@ def train_teacher_group(job: TeacherJob, clips: list | None = None, log=print,
     `clips` are the loaded clips of job.sources (loaded here when None; a Ray task receives them from the
     driver, so clip files need not exist on the worker). `on_checkpoint(path)` runs after each periodic
     checkpoint (a Ray worker without shared storage mirrors the folder to the driver there)."""
-    import torch
-
-    from robot_hoi.embodiment import load_embodiment
-    from robot_hoi.rl.checkpoint import BEST_CHECKPOINT, load_model_state, read_checkpoint
-    from robot_hoi.rl.eval_curve import EVAL_CURVE_FILE
-    from robot_hoi.rl.evaluation import VALIDATION_SEED, summarise
-    from robot_hoi.rl.runner import OnPolicyRunner
-    from robot_hoi.sim.device import check_gpu_memory, policy_device, resolve_env_cfg
-    from robot_hoi.tasks.interaction import factory
-
     started = time.monotonic()
     torch.set_num_threads(max(job.torch_threads, 1))
     run_dir = Path(job.run_dir)
@@ -213,9 +221,6 @@ def train_teacher_group(job: TeacherJob, clips: list | None = None, log=print,
 def evaluation_envs(clips: list, env_cfg, embodiment, cache: Path, episodes: int, seed: int) -> dict[str, Any]:
     """One env per clip under the default evaluation protocol (robot_hoi.rl.evaluation), from the training env's
     (resolved) config: where the model is."""
-    from robot_hoi.rl.evaluation import DEFAULT_PROTOCOL, load_protocol, protocol_env_cfg
-    from robot_hoi.tasks.interaction import factory
-
     cfg = protocol_env_cfg(env_cfg, load_protocol(DEFAULT_PROTOCOL)[1], episodes, seed)
     return {clip.name: factory.make_env([clip], cfg, embodiment, cache=cache) for clip in clips}
 
@@ -223,8 +228,6 @@ def evaluation_envs(clips: list, env_cfg, embodiment, cache: Path, episodes: int
 def evaluate_envs(envs: dict[str, Any], model, seed: int) -> dict[str, dict]:
     """evaluation.evaluate on each env, its generator re-seeded first: reused envs give every policy the same
     starts."""
-    from robot_hoi.rl.evaluation import evaluate
-
     results = {}
     for name, env in envs.items():
         env.generator.manual_seed(seed)
@@ -233,8 +236,6 @@ def evaluate_envs(envs: dict[str, Any], model, seed: int) -> dict[str, dict]:
 
 
 def _evaluation_record(results: dict[str, dict], job: TeacherJob) -> dict[str, Any]:
-    from robot_hoi.rl.evaluation import DEFAULT_PROTOCOL, summarise
-
     return {"protocol": DEFAULT_PROTOCOL, "episodes_per_clip": job.eval_episodes, "seed": job.eval_seed,
             "clips": results,
             "mean": summarise(results)}
@@ -301,11 +302,6 @@ def _number(value: float | None) -> str:
 
 def print_summary(summaries: dict[str, dict], failures: dict[str, str], title: str) -> None:
     """The final table: one row per teacher (failed ones with their error)."""
-    from rich import box
-    from rich.table import Table
-
-    from robot_hoi.utils.console import table_console
-
     table = Table(title=title, box=box.SIMPLE_HEAD, pad_edge=False, show_edge=False, collapse_padding=True)
     for col in ("teacher", "it", "return", "success", "dur s", "E_h cm", "E_o cm", "wall s"):  # host: in the lines
         table.add_column(col, justify="left" if col == "teacher" else "right",

@@ -19,6 +19,7 @@ import mujoco
 import torch
 from torch import Tensor
 
+from robot_hoi.sim.device import resolve_physics
 from robot_hoi.utils.mujoco_model import with_body_mass
 
 # What a change of one body's mass changes in a compiled model (with_body_mass: the mass, the inertia and the
@@ -110,13 +111,12 @@ class PhysicsBackend(ABC):
 
 
 def make_backend(name: str, model: mujoco.MjModel, num_envs: int, decimation: int, **kwargs) -> PhysicsBackend:
-    from robot_hoi.sim.device import resolve_physics
-
     name, device = resolve_physics(name, kwargs.pop("device", None))
     if name == "cpu":
+        # the backends subclass PhysicsBackend from this module: imported here, not at the top (a cycle)
         from robot_hoi.sim.mujoco_cpu import MujocoCpuBackend
 
         return MujocoCpuBackend(model, num_envs, decimation, **kwargs)
-    from robot_hoi.sim.warp_backend import MujocoWarpBackend
+    from robot_hoi.sim.warp_backend import MujocoWarpBackend  # a cycle too; it needs the warp extra to run
 
     return MujocoWarpBackend(model, num_envs, decimation, device=device, **kwargs)

@@ -13,6 +13,8 @@ import mujoco
 import numpy as np
 import trimesh
 
+from robot_hoi.embodiment.collision import world_bits
+
 OBJECT_BODY = "object"
 OBJECT_JOINT = "object_joint"
 FINGERS = ("pinky", "ring", "middle", "index", "thumb")
@@ -96,8 +98,6 @@ def add_task_object(spec: mujoco.MjSpec, embodiment, object_asset, *, density: f
     """The interaction task's object (`add_object` on the world's collision bits, the asset's known mass winning
     over `density`) and the sensors (`add_sensors`): what training and sim2sim add alike to a robot spec. Returns
     the contact sensor names."""
-    from robot_hoi.embodiment.collision import world_bits
-
     contype, conaffinity = world_bits()
     add_object(spec, np.asarray(object_asset.vertices), np.asarray(object_asset.faces), density=density,
                friction=friction, contype=contype, conaffinity=conaffinity,

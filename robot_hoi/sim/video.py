@@ -14,8 +14,11 @@ from __future__ import annotations
 from collections.abc import Callable, Iterable
 from pathlib import Path
 
+import imageio.v2 as imageio
 import mujoco
 import numpy as np
+
+from deploy.atomic import atomic_path
 
 GHOST_RGBA = (0.25, 0.8, 1.0, 0.3)  # light blue, mostly transparent
 SIZE = (640, 480)
@@ -101,10 +104,6 @@ class StateRenderer:
 
 def write_mp4(path: str | Path, frames: Iterable[np.ndarray], fps: float) -> Path:
     """H.264 MP4, written atomically (frames may be a generator)."""
-    import imageio.v2 as imageio
-
-    from deploy.atomic import atomic_path
-
     path = Path(path)
     with atomic_path(path) as tmp, imageio.get_writer(tmp, fps=fps, codec="libx264", macro_block_size=8,
                                                       format="FFMPEG") as writer:

@@ -12,18 +12,41 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from robot_hoi.embodiment import load_embodiment
 from robot_hoi.errors import UserError
-from robot_hoi.rl.evaluation import EvalProtocol, apply_env_overrides, clip_record, evaluate_definitions
+from robot_hoi.rl.checkpoint import resolve_checkpoint
+from robot_hoi.rl.evaluation import (
+    EvalProtocol,
+    apply_env_overrides,
+    clip_record,
+    evaluate_definitions,
+    overall_record,
+)
+from robot_hoi.rl.policy_eval import make_record, resolve_protocol
+from robot_hoi.student.checkpoint import load_student
+from robot_hoi.student.evaluation import GroupsAsPolicy
+from robot_hoi.student.history import HistoryProvider, feature_index
+from robot_hoi.student.skillmimic import ENCODER_FILE, load_history_encoder
+from robot_hoi.student.student_env import StudentEnv
+from robot_hoi.student.task import (
+    evaluation_cfg,
+    make_scene,
+    mocap_reference,
+    read_student_task,
+    retarget_cache,
+    task_folder,
+    task_references,
+)
+from robot_hoi.tasks.interaction import factory
+from robot_hoi.tasks.interaction.env import InteractionEnv
+from robot_hoi.tasks.interaction.env_cfg import saved_env_cfg
+from robot_hoi.tasks.interaction.mdp.observations import student_observation_spec
 
 REFERENCES = ("mocap", "distilled")
 
 
 def student_providers(groups: list[str], env, cfg, folder: Path) -> dict:
     """Observation providers for the student's extra actor groups (the SkillMimic-V2 history embedding)."""
-    from robot_hoi.student.history import HistoryProvider, feature_index
-    from robot_hoi.student.skillmimic import ENCODER_FILE, load_history_encoder
-    from robot_hoi.tasks.interaction.mdp.observations import student_observation_spec
-
     providers = {}
     for group in groups[1:]:
         if group != "history":
@@ -39,24 +62,6 @@ def evaluate_student(checkpoint: str | Path, data: list[str] | None = None, epis
                      protocol: EvalProtocol | None = None) -> dict[str, dict[str, dict]]:
     """results[reference][clip] -> the clip's evaluation record (robot_hoi.rl.evaluation.clip_record), reference in
     REFERENCES ("distilled" only where the student had one). `protocol` None: the one deterministic stand."""
-    from robot_hoi.embodiment import load_embodiment
-    from robot_hoi.student.checkpoint import load_student
-    from robot_hoi.student.evaluation import GroupsAsPolicy
-    from robot_hoi.student.student_env import StudentEnv
-    from robot_hoi.student.task import (
-        evaluation_cfg,
-        make_scene,
-        mocap_reference,
-        read_student_task,
-        retarget_cache,
-        task_folder,
-        task_references,
-    )
-    from robot_hoi.tasks.interaction import factory
-    from robot_hoi.tasks.interaction.env import InteractionEnv
-    from robot_hoi.tasks.interaction.env_cfg import saved_env_cfg
-    from robot_hoi.tasks.interaction.mdp.observations import student_observation_spec
-
     if episodes < 1:
         raise UserError(f"--episodes must be at least 1, got {episodes}")
     checkpoint = Path(checkpoint)
@@ -104,10 +109,6 @@ def evaluate_student(checkpoint: str | Path, data: list[str] | None = None, epis
 def student_record(request) -> dict:
     """The evaluation record (robot_hoi.rl.policy_eval) of the student checkpoint `request.checkpoint`: its MoCap
     reference per clip, and its distilled reference beside it where it trained on one."""
-    from robot_hoi.rl.checkpoint import resolve_checkpoint
-    from robot_hoi.rl.evaluation import overall_record
-    from robot_hoi.rl.policy_eval import make_record, resolve_protocol
-
     name, protocol = resolve_protocol(request)
     ckpt = resolve_checkpoint(request.checkpoint)
     clips = evaluate_student(ckpt, request.data, request.episodes, request.seed, request.overrides, protocol)

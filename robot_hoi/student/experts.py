@@ -26,6 +26,7 @@ from robot_hoi.student.student_env import StudentEnv
 from robot_hoi.student.task import evaluation_cfg
 from robot_hoi.student.teachers import TeacherMember, TeacherRun
 from robot_hoi.tasks.interaction import factory
+from robot_hoi.tasks.interaction.env import InteractionEnv
 
 IMITATE, INTERACT = 0, 1
 KINDS = ("imitation", "interaction")
@@ -57,8 +58,6 @@ def train_expert(setup, run: TeacherRun, clip_ids: list[int], kind: str, budget,
     folder.mkdir(parents=True, exist_ok=True)
     env_cfg = copy.deepcopy(setup.teacher_env_cfg)
     env_cfg.terminations.max_mean_link_error = cm.imitation_tau if kind == "imitation" else cm.interaction_tau
-    from robot_hoi.tasks.interaction.env import InteractionEnv
-
     env = InteractionEnv(env_cfg, setup.scene, [setup.mocap[i] for i in clip_ids])
     train_cfg = copy.deepcopy(run.train_cfg)
     train_cfg.runner.progress = setup.cfg.runner.progress
@@ -99,12 +98,9 @@ def train_expert(setup, run: TeacherRun, clip_ids: list[int], kind: str, budget,
 def prepare_experts(setup, budget, resume: bool = False, write: bool = True) -> None:
     """Replace setup.members by two experts per teacher and route every clip (setup.clip_teacher/clip_group).
     Experts already in OUT/experts are reused; `write` False leaves routing.json alone (ranks other than 0)."""
-    from robot_hoi.student.pipeline import scale_budget
-    from robot_hoi.tasks.interaction.env import InteractionEnv
-
     cm = setup.cfg.complexmimic
     height_map = HeightMap(setup.scene.object_asset, cm.height_map_size, cm.height_map_spacing)
-    share = scale_budget(budget, 1.0 / (2 * len(setup.runs)))
+    share = budget.scaled(1.0 / (2 * len(setup.runs)))
     members, clip_teacher, clip_group, routing = [], list(setup.clip_teacher), [0] * len(setup.sources), {}
     eval_cfg = evaluation_cfg(setup.teacher_env_cfg, cm.routing_episodes)
     eval_cfg.terminations.max_mean_link_error = cm.student_tau  # success: never 0.5 m off (ComplexMimic Sec. 4.1)

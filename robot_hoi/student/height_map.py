@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 import torch
+import trimesh
 from torch import Tensor
 
 from robot_hoi.utils.torch_rot import quat_apply, yaw_quat
@@ -49,8 +50,6 @@ def top_surface_heights(points_xy: Tensor, triangles: Tensor, floor: float = 0.0
 
 def hull_triangles(vertices: np.ndarray, faces: np.ndarray) -> Tensor:
     """(F, 3, 3) triangles of the convex hull the simulation uses for the object, in the object frame."""
-    import trimesh
-
     hull = trimesh.Trimesh(vertices=vertices, faces=faces, process=True).convex_hull
     return torch.tensor(np.array(hull.triangles), dtype=torch.float32)
 

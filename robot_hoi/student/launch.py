@@ -1,4 +1,5 @@
-"""`robot-hoi train student --nproc N`: N processes on this machine, one data-parallel student.
+"""`robot-hoi train student`: the student trained in this process, or with `--nproc N` in N processes on this
+machine, one data-parallel student.
 
 This process first does once what every rank would otherwise repeat or race on: the ComplexMimic experts, the
 distilled references, the SkillMimic-V2 history encoder and task.json (all cached in the run folder). It then
@@ -11,6 +12,8 @@ and evaluates. The ranks' checksums must agree: the launcher refuses to report s
 from __future__ import annotations
 
 import argparse
+import faulthandler
+import gc
 import os
 import sys
 import tempfile
@@ -18,9 +21,23 @@ import traceback
 from pathlib import Path
 
 import torch
+import torch.distributed as dist
+import torch.multiprocessing as mp
 
 from robot_hoi.errors import UserError
 from robot_hoi.student.distributed import Rank, backend_for, default_nproc
+from robot_hoi.student.pipeline import prepare_run, student_environment, train
+
+
+def run(args: argparse.Namespace) -> int:
+    """`robot-hoi train student`: `pipeline.train` in this process, or in `resolve_nproc(args)` spawned ranks."""
+    torch.set_num_threads(max(getattr(args, "torch_threads", 1), 1))
+    nproc = resolve_nproc(args)
+    if nproc > 1:
+        train_distributed(args, nproc)
+    else:
+        train(args)
+    return 0
 
 
 def resolve_nproc(args: argparse.Namespace) -> int:
@@ -47,16 +64,12 @@ def rank_device(device: str, rank: int) -> str:
 
 def prepare_caches(args: argparse.Namespace) -> None:
     """Everything the ranks load instead of making: experts, distilled references, history encoder, task.json."""
-    from robot_hoi.student.pipeline import prepare_run, student_environment
-
     setup, _ = prepare_run(args)
     student_environment(setup, write=True)
 
 
 def train_distributed(args: argparse.Namespace, nproc: int) -> list[dict]:
     """Train with `nproc` spawned ranks; returns their reports (ordered by rank)."""
-    import torch.multiprocessing as mp
-
     prepare_caches(args)
     context = mp.get_context("spawn")
     queue = context.SimpleQueue()
@@ -86,13 +99,6 @@ def train_distributed(args: argparse.Namespace, nproc: int) -> list[dict]:
 
 
 def _worker(rank: int, world_size: int, rendezvous: str, args: argparse.Namespace, queue) -> None:
-    import faulthandler
-    import gc
-
-    import torch.distributed as dist
-
-    from robot_hoi.student.pipeline import train
-
     faulthandler.enable()  # a crash in native code (gloo, nccl, MuJoCo) shows where it happened
     torch.set_num_threads(max(getattr(args, "torch_threads", 1), 1))
     device = rank_device(args.device, rank)

@@ -23,19 +23,30 @@ import json
 import os
 import re
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import torch
 
 from deploy.atomic import atomic_write_text
 from robot_hoi.data.cli_options import clip_options
+from robot_hoi.embodiment import load_embodiment
 from robot_hoi.errors import UserError
 from robot_hoi.rl.budget import Budget, parse_budget
+from robot_hoi.rl.checkpoint import latest_checkpoint
+from robot_hoi.rl.eval_curve import EVAL_CURVE_FILE, read_curve
+from robot_hoi.rl.evaluation import DEFAULT_PROTOCOL, VALIDATION_SEED, load_protocol, summarise
 from robot_hoi.sim.device import physics_device, resolve_env_cfg
+from robot_hoi.student import complexmimic, skillmimic
 from robot_hoi.student.config import DEFAULT_PRESET, PRESETS, StudentTrainConfig, load_student_config
 from robot_hoi.student.distributed import Rank, SharedBudget, state_checksum, sum_over_ranks
+from robot_hoi.student.evaluation import evaluate_groups, format_table
+from robot_hoi.student.experts import prepare_experts
+from robot_hoi.student.reference_distill import FORMAT as REFERENCE_FORMAT
+from robot_hoi.student.reference_distill import load_reference, rollout_reference, save_reference
 from robot_hoi.student.reference_view import ReferenceTimeline, ReferenceView
+from robot_hoi.student.runner import DistillationRunner
+from robot_hoi.student.student_env import StudentEnv, fresh_providers
 from robot_hoi.student.task import (
     STUDENT_GROUP,
     check_single_object,
@@ -46,8 +57,11 @@ from robot_hoi.student.task import (
     write_student_task,
 )
 from robot_hoi.student.teachers import CompositeTeacher, TeacherMember, TeacherRun, load_teacher_runs
+from robot_hoi.student.tokens import token_layout
 from robot_hoi.tasks.interaction import factory
+from robot_hoi.tasks.interaction.env import InteractionEnv
 from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg, saved_env_cfg
+from robot_hoi.tasks.interaction.mdp.observations import student_observation_spec
 from robot_hoi.utils.config import apply_overrides
 
 
@@ -72,17 +86,7 @@ class Setup:
     task_extra: dict = field(default_factory=dict)
 
 
-def scale_budget(budget: Budget, fraction: float) -> Budget:
-    def part(v):
-        return None if v is None else type(v)(max(v * fraction, 1))
-
-    return replace(budget, wall_seconds=part(budget.wall_seconds), samples=part(budget.samples),
-                   iterations=part(budget.iterations))
-
-
 def prepare(args: argparse.Namespace) -> Setup:
-    from robot_hoi.embodiment import load_embodiment
-
     if not getattr(args, "teachers", None):
         raise UserError("robot-hoi train student needs --teachers RUN_DIR (the output folder of `robot-hoi train`)")
     if getattr(args, "data", None):
@@ -126,8 +130,6 @@ def prepare(args: argparse.Namespace) -> Setup:
 
 def rollout_env(setup: Setup, index: int, cfg: InteractionEnvCfg | None = None):
     """One env (num_envs 1, eval settings) on clip `index`'s MoCap reference, long enough for the whole clip."""
-    from robot_hoi.tasks.interaction.env import InteractionEnv
-
     cfg = evaluation_cfg(cfg or setup.teacher_env_cfg, num_envs=1)
     cfg.max_episode_frames = max(cfg.max_episode_frames, setup.mocap[index].num_frames + cfg.warmup_frames + 2)
     return InteractionEnv(cfg, setup.scene, [setup.mocap[index]])
@@ -135,9 +137,6 @@ def rollout_env(setup: Setup, index: int, cfg: InteractionEnvCfg | None = None):
 
 def distil_references(setup: Setup) -> list[tuple[object, str | None]]:
     """(reference, path relative to OUT/student) per clip: the routed teacher's rollout (None: clip dropped)."""
-    from robot_hoi.student.reference_distill import FORMAT as REFERENCE_FORMAT
-    from robot_hoi.student.reference_distill import load_reference, rollout_reference, save_reference
-
     folder = setup.out / "references"
     d = setup.cfg.distill
     results: list[tuple[object, str | None]] = []
@@ -182,11 +181,6 @@ class StudentParts:
 def student_environment(setup: Setup, write: bool = True) -> StudentParts:
     """The student env (with the options' providers): distils (or reuses) the references, pre-trains (or loads) the
     SkillMimic-V2 history encoder and, with `write`, records the task in OUT/student/task.json."""
-    from robot_hoi.student.student_env import StudentEnv
-    from robot_hoi.student.tokens import token_layout
-    from robot_hoi.tasks.interaction.env import InteractionEnv
-    from robot_hoi.tasks.interaction.mdp.observations import student_observation_spec
-
     cfg = setup.cfg
     if cfg.distill.reference == "teacher":
         distilled = distil_references(setup)
@@ -208,8 +202,6 @@ def student_environment(setup: Setup, write: bool = True) -> StudentParts:
     providers, spec_extra = {}, []
     options = []
     if cfg.skillmimic.enabled:
-        from robot_hoi.student import skillmimic
-
         options.append(skillmimic.SkillMimicSetup(cfg.skillmimic, env, setup.out, cfg.seed))
         providers.update(options[-1].providers())
         spec_extra += options[-1].spec_extra()
@@ -232,8 +224,6 @@ def student_environment(setup: Setup, write: bool = True) -> StudentParts:
 def build_student(setup: Setup, args: argparse.Namespace, rank: Rank | None = None):
     """The student env (with the options' providers and samplers) and its DistillationRunner, as `rank` of a
     data-parallel group (default: a single process). Only rank 0 logs and writes."""
-    from robot_hoi.student.runner import DistillationRunner
-
     rank = rank or Rank()
     cfg = setup.cfg
     parts = student_environment(setup, write=rank.is_main)
@@ -247,8 +237,6 @@ def build_student(setup: Setup, args: argparse.Namespace, rank: Rank | None = No
                                               "keyframes": list(setup.env_cfg.student_keyframes)})
     options = list(parts.options)
     if cfg.complexmimic.enabled and cfg.complexmimic.sampling:
-        from robot_hoi.student import complexmimic
-
         reduce = sum_over_ranks(rank.device) if rank.distributed else None  # every rank's episodes
         options.append(complexmimic.DifficultySetup(cfg.complexmimic, [setup.clip_group[i] for i in parts.keep],
                                                     cfg.seed, reduce=reduce))
@@ -271,31 +259,15 @@ def prepare_run(args: argparse.Namespace, rank: Rank | None = None) -> tuple[Set
     if rank.is_main:
         print(f"student from {len(setup.runs)} teacher(s) on {len(setup.clips)} clip(s) -> {setup.out}")
     if setup.cfg.complexmimic.enabled:
-        from robot_hoi.student.experts import prepare_experts
-
-        expert_budget = scale_budget(budget, setup.cfg.complexmimic.expert_budget_fraction)
-        budget = scale_budget(budget, 1.0 - setup.cfg.complexmimic.expert_budget_fraction)
+        expert_budget = budget.scaled(setup.cfg.complexmimic.expert_budget_fraction)
+        budget = budget.scaled(1.0 - setup.cfg.complexmimic.expert_budget_fraction)
         prepare_experts(setup, expert_budget, resume=args.resume, write=rank.is_main)
     return setup, budget
-
-
-def run(args: argparse.Namespace) -> int:
-    from robot_hoi.student.launch import resolve_nproc, train_distributed
-
-    torch.set_num_threads(max(getattr(args, "torch_threads", 1), 1))
-    nproc = resolve_nproc(args)
-    if nproc > 1:
-        train_distributed(args, nproc)
-    else:
-        train(args)
-    return 0
 
 
 def train(args: argparse.Namespace, rank: Rank | None = None) -> dict:
     """Train the student in this process (as `rank` of a data-parallel group, or alone); rank 0 evaluates it.
     Returns this rank's report: samples it collected, the run's total, its parameter checksum, what it saved."""
-    from robot_hoi.rl.checkpoint import latest_checkpoint
-
     rank = rank or Rank()
     setup, budget = prepare_run(args, rank)
     runner, student_env, keep = build_student(setup, args, rank)
@@ -343,10 +315,6 @@ def train(args: argparse.Namespace, rank: Rank | None = None) -> dict:
 
 def evaluate_run(setup: Setup, runner, keep: list[int]) -> dict:
     """Each kept clip: the teacher on MoCap, the student on its reference and on MoCap (what a deploy tracks)."""
-    from robot_hoi.student.evaluation import evaluate_groups, format_table
-    from robot_hoi.student.student_env import StudentEnv, fresh_providers
-    from robot_hoi.tasks.interaction.env import InteractionEnv
-
     episodes = setup.cfg.eval_episodes
     rows: dict[str, dict[str, dict[str, float]]] = {}
     model = runner.evaluation_model().eval()
@@ -373,11 +341,6 @@ def validation_evaluator(setup: Setup, runner, keep: list[int]):
     with), under the randomized protocol on validation seeds (VALIDATION_SEED + seed, disjoint from `robot-hoi
     eval`'s) as the teachers' model selection: envs built once and re-seeded, so every checkpoint meets the same
     starts. The runner keeps the best as model_best.pt."""
-    from robot_hoi.rl.evaluation import DEFAULT_PROTOCOL, VALIDATION_SEED, load_protocol, summarise
-    from robot_hoi.student.evaluation import evaluate_groups
-    from robot_hoi.student.student_env import StudentEnv, fresh_providers
-    from robot_hoi.tasks.interaction.env import InteractionEnv
-
     seed = VALIDATION_SEED + setup.cfg.seed
     episodes = setup.cfg.runner.eval_episodes
     protocol = load_protocol(DEFAULT_PROTOCOL)[1]
@@ -402,9 +365,6 @@ def selection_record(folder: Path, cfg: StudentTrainConfig) -> dict | None:
     """Which checkpoint the run stands for (model_best.pt) and the evidence: its validation row, the evaluations
     before and after it and how far their success spreads, the protocol and the stability settings. None without
     in-training evaluations."""
-    from robot_hoi.rl.eval_curve import EVAL_CURVE_FILE, read_curve
-    from robot_hoi.rl.evaluation import DEFAULT_PROTOCOL, VALIDATION_SEED
-
     path = folder / EVAL_CURVE_FILE
     if not path.is_file():
         return None

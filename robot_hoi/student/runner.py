@@ -21,6 +21,7 @@ import torch
 from torch import Tensor
 
 from robot_hoi.errors import UserError
+from robot_hoi.rl.checkpoint import load_model_state
 from robot_hoi.rl.logger import LogWriter
 from robot_hoi.rl.normalizer import RunningNormalizer
 from robot_hoi.rl.ppo import PPO
@@ -218,8 +219,6 @@ class DistillationRunner(OnPolicyRunner):
     def resume(self, path: str | Path) -> None:
         super().resume(path)
         if "ema_model" in self._loaded and self.cfg.stability.ema_decay > 0:
-            from robot_hoi.rl.checkpoint import load_model_state
-
             self.ema = copy.deepcopy(self.model).eval().requires_grad_(False)
             load_model_state(self.ema, self._loaded["ema_model"], path)
             self.ema_updates = int(self._loaded.get("ema_updates", self.iteration))

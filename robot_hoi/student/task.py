@@ -10,10 +10,16 @@ from dataclasses import asdict
 from pathlib import Path
 
 from deploy.atomic import atomic_write_text
+from robot_hoi.embodiment import load_embodiment
 from robot_hoi.errors import UserError
+from robot_hoi.rl.evaluation import protocol_env_cfg
+from robot_hoi.student.reference_distill import load_reference
 from robot_hoi.tasks.interaction import factory
+from robot_hoi.tasks.interaction.env import InteractionEnv
 from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg, saved_env_cfg
 from robot_hoi.tasks.interaction.mdp.observations import DEFAULT_STUDENT_TERMS
+from robot_hoi.tasks.interaction.reference import build_reference
+from robot_hoi.tasks.interaction.scene_setup import InteractionScene
 
 TASK_FILE = factory.TASK_FILE
 STUDENT_GROUP = "student"
@@ -22,8 +28,6 @@ STUDENT_GROUP = "student"
 def evaluation_cfg(env_cfg: InteractionEnvCfg, num_envs: int, seed: int = 0, protocol=None) -> InteractionEnvCfg:
     """As `robot-hoi eval`: every episode from the stand at the clip start drawn by `protocol` (None: the one
     deterministic stand), no PSI, no assist."""
-    from robot_hoi.rl.evaluation import protocol_env_cfg
-
     return protocol_env_cfg(env_cfg, protocol, num_envs, seed)
 
 
@@ -37,15 +41,11 @@ def student_env_cfg(env_cfg: InteractionEnvCfg) -> InteractionEnvCfg:
 
 
 def mocap_reference(clip, embodiment, env_cfg: InteractionEnvCfg, cache: Path | None):
-    from robot_hoi.tasks.interaction.reference import build_reference
-
     return build_reference(clip, factory.load_or_retarget(clip, embodiment, cache, factory.retarget_options(env_cfg)),
                            env_cfg.reference_links)
 
 
 def make_scene(clip, embodiment, env_cfg: InteractionEnvCfg):
-    from robot_hoi.tasks.interaction.scene_setup import InteractionScene
-
     if clip.object is None:
         raise UserError(f"clip {clip.name}: no object mesh loaded; the simulation needs it")
     return InteractionScene.for_task(embodiment, clip.object, env_cfg)
@@ -83,9 +83,6 @@ def task_folder(checkpoint: Path) -> Path:
 def task_references(task: dict, folder: Path, env_cfg: InteractionEnvCfg, reference: str = "trained"):
     """(embodiment, clips, sources, references) of a student task. reference "trained": the references it trained
     on (distilled where it had them); "mocap": the clips' MoCap retargets."""
-    from robot_hoi.embodiment import load_embodiment
-    from robot_hoi.student.reference_distill import load_reference
-
     embodiment = load_embodiment(task["embodiment"])
     sources = list(task["sources"])
     clips = [factory.load_source(s, task.get("clip_options")) for s in sources]
@@ -117,8 +114,6 @@ def retarget_cache(task: dict, folder: Path, clip) -> Path:
 def build_task_env(task: dict, folder: Path, env_cfg: InteractionEnvCfg | None = None,
                    reference: str = "trained"):
     """(InteractionEnv, clips, sources) of a student task on its `reference`s (see task_references)."""
-    from robot_hoi.tasks.interaction.env import InteractionEnv
-
     cfg = env_cfg or saved_env_cfg(task["env"], f"{folder / TASK_FILE}")
     embodiment, clips, sources, references = task_references(task, folder, cfg, reference)
     env = InteractionEnv(cfg, make_scene(clips[0], embodiment, cfg), references)

@@ -9,6 +9,7 @@ imitating it means what the teacher meant.
 
 from __future__ import annotations
 
+import json
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -17,12 +18,13 @@ import torch
 from torch import Tensor
 
 from robot_hoi.errors import UserError
-from robot_hoi.rl.checkpoint import policy_checkpoint
+from robot_hoi.rl.checkpoint import load_policy, policy_checkpoint
 from robot_hoi.rl.config import TrainConfig
 from robot_hoi.rl.models import ActorCritic
 from robot_hoi.sim.device import module_device
+from robot_hoi.student.evaluation import evaluate_groups
 from robot_hoi.student.reference_view import ReferenceView
-from robot_hoi.student.student_env import ObservationProvider
+from robot_hoi.student.student_env import ObservationProvider, StudentEnv
 
 TASK_FILE = "task.json"
 # Environment settings that change what a teacher's observation or action means. Teachers sharing one student
@@ -68,10 +70,6 @@ def teacher_folders(run_dir: Path) -> list[Path]:
 
 
 def load_teacher_runs(run_dir: str | Path) -> list[TeacherRun]:
-    import json
-
-    from robot_hoi.rl.checkpoint import load_policy
-
     runs = []
     for folder in teacher_folders(Path(run_dir)):
         ckpt = policy_checkpoint(folder)
@@ -135,8 +133,6 @@ class TeacherMember:
 
     def own_env(self, env):
         """`env` (an InteractionEnv on the teacher's own reference) with the teacher's extra groups."""
-        from robot_hoi.student.student_env import StudentEnv
-
         return StudentEnv(env, {g: self.extra_groups[g] for g in self.obs_groups if g != "policy"})
 
     def rollout_policy(self, wrapped_env) -> Callable[[dict[str, Tensor]], Tensor]:
@@ -147,8 +143,6 @@ class TeacherMember:
 
     def evaluate(self, env) -> dict[str, float]:
         """robot-hoi eval's metrics in `env` (its own reference, evaluation settings)."""
-        from robot_hoi.student.evaluation import evaluate_groups
-
         return evaluate_groups(self.own_env(env), self.model, list(self.obs_groups))
 
 

@@ -106,7 +106,7 @@ def test_each_rank_has_its_own_envs(teacher_run, tmp_path):
 
 
 def test_a_rank_that_refuses_its_settings_stops_the_run_with_its_message(teacher_run, tmp_path):
-    from robot_hoi.student.pipeline import run
+    from robot_hoi.student.launch import run
 
     args = build_parser().parse_args(student_args(teacher_run, tmp_path / "kl", "--set", "ppo.desired_kl=0.01"))
     args.nproc = 2

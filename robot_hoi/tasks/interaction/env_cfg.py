@@ -11,7 +11,10 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import ClassVar
 
+from robot_hoi.errors import UserError
+from robot_hoi.paths import CONFIGS_DIR
 from robot_hoi.termination import Thresholds
+from robot_hoi.utils.config import load_dataclass, merge_dicts, read_yaml_chain
 
 
 @dataclass
@@ -177,9 +180,8 @@ class RetargetCfg:
     anchor_mode: str | None = None
 
     def __post_init__(self) -> None:
-        """Each value checked as the user spells its key (the retarget's modules load only for a value given)."""
-        from robot_hoi.errors import UserError
-
+        """Each value checked as the user spells its key (the retarget's modules, which import MuJoCo, load only for
+        a value given: `robot-hoi --help` imports this module)."""
         if self.solver is not None:
             from robot_hoi.retarget.ik import IK_SOLVERS
 
@@ -274,6 +276,7 @@ class InteractionEnvCfg:
     success_max_link_error: float = 0.15
 
     def __post_init__(self) -> None:
+        # not at the top: data.objects imports trimesh and scipy (~0.7 s), and `robot-hoi --help` imports this module
         from robot_hoi.data.objects import check_object_collision
 
         check_object_collision(self.object_collision, ValueError)  # the config loader names the file
@@ -289,8 +292,6 @@ class InteractionEnvCfg:
 def saved_env_cfg(data: dict, source: str) -> InteractionEnvCfg:
     """The task config a run saved (task.json, an exported policy's metadata 'task'); `source` names it in errors.
     Runs saved before the retarget: block hold its settings as flat keys retarget_*: they move into the block."""
-    from robot_hoi.utils.config import load_dataclass
-
     data = dict(data)
     block = dict(data.get("retarget") or {})
     for old, new in LEGACY_RETARGET_KEYS.items():
@@ -306,8 +307,6 @@ def split_overrides(overrides: list[str], bare: bool = False) -> tuple[list[str]
     retarget.KEY=VALUE (the retarget: block) stays as it is; `bare`: KEY=VALUE without a prefix is the task
     config's too (eval's --set). A retarget setting spelled otherwise (env.retarget.KEY, env.retarget_KEY) is an
     error naming its one spelling."""
-    from robot_hoi.errors import UserError
-
     task: list[str] = []
     others: list[str] = []
     for item in overrides:
@@ -327,18 +326,12 @@ def split_overrides(overrides: list[str], bare: bool = False) -> tuple[list[str]
 
 
 def reward_set_names() -> list[str]:
-    from robot_hoi.paths import CONFIGS_DIR
-
     return sorted(p.stem for p in (CONFIGS_DIR / "tasks" / "rewards").glob("*.yaml"))
 
 
 def load_reward_set(name: str) -> tuple[str, dict[str, RewardTermCfg | None]]:
     """(reward_mode, rewards) of configs/tasks/rewards/<name>.yaml or of a YAML path. A set may name another as
     its `base:` and hold only what differs: a term's fields merge into the base's term, `null` disables it."""
-    from robot_hoi.errors import UserError
-    from robot_hoi.paths import CONFIGS_DIR
-    from robot_hoi.utils.config import load_dataclass, merge_dicts, read_yaml_chain
-
     chain = read_yaml_chain(name, CONFIGS_DIR / "tasks" / "rewards", "reward set", {"reward_mode", "rewards"})
     data: dict = {}
     for path, layer in chain:

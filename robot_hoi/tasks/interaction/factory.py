@@ -14,8 +14,18 @@ from dataclasses import asdict, replace
 from pathlib import Path
 
 from deploy.atomic import atomic_write_text
+from robot_hoi.data.clip import load_clip
+from robot_hoi.data.synth import BASE_MOTIONS, embedded_clip
+from robot_hoi.embodiment import build_model
 from robot_hoi.errors import UserError
+from robot_hoi.retarget.feasibility import kinematic_feasibility
+from robot_hoi.retarget.motion import RobotMotion
+from robot_hoi.retarget.pipeline import RetargetOptions, retarget_clip
+from robot_hoi.tasks.interaction.env import InteractionEnv
 from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg
+from robot_hoi.tasks.interaction.reference import build_reference
+from robot_hoi.tasks.interaction.scene_setup import InteractionScene
+from robot_hoi.utils.fingerprint import fingerprint
 
 EMBEDDED_PREFIX = "embedded:"
 CLIP_SUFFIXES = (".pt", ".npz")
@@ -32,8 +42,6 @@ def expand_sources(data: list[str] | None) -> list[str]:
     sources: list[str] = []
     for item in data:
         if item == f"{EMBEDDED_PREFIX}base":  # the base-motion library (robot_hoi.data.synth.BASE_MOTIONS)
-            from robot_hoi.data.synth import BASE_MOTIONS
-
             sources += [f"{EMBEDDED_PREFIX}{kind}:{seed}" for kind, seed in BASE_MOTIONS]
             continue
         if item.startswith(EMBEDDED_PREFIX):
@@ -56,11 +64,7 @@ def load_source(source: str, clip_options: dict | None = None):
     """One clip from a source string (validated by the data layer); clip_options: load_clip keywords
     (robot_hoi.data.cli_options: objects folder, repair)."""
     if source.startswith(EMBEDDED_PREFIX):
-        from robot_hoi.data.synth import embedded_clip
-
         return embedded_clip(source[len(EMBEDDED_PREFIX):])
-    from robot_hoi.data.clip import load_clip
-
     return load_clip(source, **(clip_options or {}))
 
 
@@ -110,8 +114,6 @@ def _task_setting(env_cfg: InteractionEnvCfg, key: str):
 def retarget_options(env_cfg: InteractionEnvCfg | None = None):
     """RetargetOptions with the task's retarget settings (the retarget's defaults where the config has none; the
     values were checked when the config was built, env_cfg.RetargetCfg)."""
-    from robot_hoi.retarget.pipeline import RetargetOptions
-
     options = RetargetOptions()
     if env_cfg is None:
         return options
@@ -127,10 +129,6 @@ def load_or_retarget(clip, embodiment, cache: Path | None, options=None):
     """The clip's robot-space reference (RobotMotion), cached as npz next to the run. `options`: RetargetOptions
     (retarget_options(env_cfg); None = the defaults); a cached reference made with other task settings (the task
     config's retarget: block, env.object_collision) is an error, not silently reused."""
-    from robot_hoi.retarget.motion import RobotMotion
-    from robot_hoi.retarget.pipeline import retarget_clip
-    from robot_hoi.utils.fingerprint import fingerprint
-
     options = options if options is not None else retarget_options()
     path = cache / f"{_safe(clip.name)}.npz" if cache is not None else None
     clip_key = fingerprint(clip)
@@ -176,9 +174,6 @@ def _setting(value) -> str:
 def kinematic_report(motion, embodiment) -> dict:
     """Foot slide, CoM outside support, joint speeds and self-penetration of a retarget
     (robot_hoi.retarget.feasibility)."""
-    from robot_hoi.embodiment import build_model
-    from robot_hoi.retarget.feasibility import kinematic_feasibility
-
     hand_joints = {c.joint for hand in embodiment.hands.values() for c in hand.channels}
     body = [i for i, n in enumerate(embodiment.actuator_names) if n not in hand_joints]
     feet = [n for n in embodiment.link_map if "ankle_roll" in n]
@@ -188,10 +183,6 @@ def kinematic_report(motion, embodiment) -> dict:
 
 def make_env(clips: list, env_cfg: InteractionEnvCfg, embodiment, cache: Path | None = None, motions=None):
     """An InteractionEnv tracking `clips` (all with the same object); `motions`: their retargets, if at hand."""
-    from robot_hoi.tasks.interaction.env import InteractionEnv
-    from robot_hoi.tasks.interaction.reference import build_reference
-    from robot_hoi.tasks.interaction.scene_setup import InteractionScene
-
     objects = {c.object_name for c in clips}
     if len(objects) != 1:
         raise UserError(f"one environment holds one object; these clips use {sorted(objects)}")

@@ -23,6 +23,9 @@ import math
 
 import torch
 
+from robot_hoi.tasks.interaction import factory
+from robot_hoi.tasks.interaction.env_cfg import RandomizationCfg
+
 SIDES = ("left", "right")
 
 
@@ -31,8 +34,6 @@ def gate_config(env_cfg):
     free, the evaluated object line, no PSI and no domain randomisation. The gate judges the object and the held
     contacts only: the body conditions (link error, root height, interaction distance) are off, so a task's
     tightened body line does not fail a reference whose object is held."""
-    from robot_hoi.tasks.interaction.env_cfg import RandomizationCfg
-
     cfg = copy.deepcopy(env_cfg)
     cfg.terminations = dataclasses.replace(cfg.terminations, max_mean_link_error=math.inf, min_root_height=-math.inf,
                                            max_interaction_distance_error=math.inf)
@@ -70,8 +71,6 @@ def held_segments(hand_contact) -> list[dict]:
 def physics_gate(clip, env_cfg, embodiment, motion=None, lead_frames: int = 10) -> dict:
     """The gate on one clip (its retarget `motion` when at hand, else retargeted with the task's settings); see
     `replay` for the result."""
-    from robot_hoi.tasks.interaction import factory
-
     cfg = gate_config(env_cfg)
     env = factory.make_env([clip], cfg, embodiment, motions=[motion] if motion is not None else None)
     return replay(env, lead_frames)
@@ -172,8 +171,6 @@ def gate_failures(clips: list, env_cfg, embodiment, caches: list) -> list[tuple[
     """(clip name, physics_gate result) of each clip whose reference fails the gate. Each clip is retarget with
     the task's settings and cached in its `caches` entry (the folder its teacher reads its reference from; None:
     this process's cache only), so the teacher does not retarget it again."""
-    from robot_hoi.tasks.interaction import factory
-
     options = factory.retarget_options(env_cfg)
     failed = []
     for clip, cache in zip(clips, caches, strict=True):

@@ -12,7 +12,11 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 import torch
+from scipy.spatial.transform import Rotation
 from torch import Tensor
+
+from robot_hoi.data.contacts import hand_contact_need
+from robot_hoi.utils.torch_rot import quat_apply
 
 
 @dataclass
@@ -70,8 +74,6 @@ def finite_difference(x: np.ndarray, fps: float) -> np.ndarray:
 
 def angular_velocity_wxyz(quat_wxyz: np.ndarray, fps: float) -> np.ndarray:
     """World-frame angular velocity of a quaternion track (T, 4) by central differences."""
-    from scipy.spatial.transform import Rotation
-
     rot = Rotation.from_quat(quat_wxyz[:, [1, 2, 3, 0]])
     omega = np.zeros((len(quat_wxyz), 3))
     if len(quat_wxyz) > 1:
@@ -94,8 +96,6 @@ def build_reference(clip, motion, link_targets: str = "ik") -> ReferenceMotion:
     """
     if link_targets not in LINK_TARGETS:
         raise ValueError(f"link_targets must be one of {LINK_TARGETS}, not {link_targets!r}")
-    from robot_hoi.utils.torch_rot import quat_apply
-
     fps = float(motion.fps)
     t = lambda a: torch.as_tensor(np.asarray(a), dtype=torch.float32)  # noqa: E731
     object_pos = np.asarray(motion.object_pos, dtype=np.float64)
@@ -126,6 +126,4 @@ def build_reference(clip, motion, link_targets: str = "ik") -> ReferenceMotion:
 
 def _hand_contact_markers(clip, num_frames: int) -> np.ndarray:
     """Required hand contact per frame (T, 2): robot_hoi.data.contacts.hand_contact_need."""
-    from robot_hoi.data.contacts import hand_contact_need
-
     return hand_contact_need(clip, num_frames)

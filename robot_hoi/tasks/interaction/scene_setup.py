@@ -6,6 +6,7 @@ import mujoco
 import numpy as np
 import torch
 
+from robot_hoi.embodiment import build_robot_spec
 from robot_hoi.sim import make_backend
 from robot_hoi.sim.scene import OBJECT_BODY, OBJECT_JOINT, SceneLayout, add_task_object
 from robot_hoi.termination import hand_link_groups
@@ -17,8 +18,6 @@ class InteractionScene:
     def __init__(self, embodiment, object_asset, *, self_collision: bool = False, density: float = 25.0,
                  friction: float = 0.9, torsional_friction: float = 0.0, timestep: float | None = None,
                  object_collision: str = "hull", friction_cone: str = "pyramidal", impratio: float = 1.0):
-        from robot_hoi.embodiment import build_robot_spec
-
         self.embodiment = embodiment
         self.object_asset = object_asset
         spec = build_robot_spec(embodiment, self_collision=self_collision, floor=True)

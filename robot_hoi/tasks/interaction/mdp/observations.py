@@ -10,6 +10,7 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
+from robot_hoi.errors import UserError
 from robot_hoi.utils.torch_rot import quat_apply_inverse
 
 # Rotations arrive as matrices the env computes once per step (env.heading_matrix H = Rz(yaw of the pelvis),
@@ -300,8 +301,6 @@ STUDENT_NOISE = {
 def check_student_terms(names) -> None:
     unknown = [n for n in names if n not in STUDENT_TERMS]
     if unknown:
-        from robot_hoi.errors import UserError
-
         raise UserError(f"env.student_obs_terms: unknown term(s) {', '.join(unknown)} (known: {', '.join(STUDENT_TERMS)})")
 
 
