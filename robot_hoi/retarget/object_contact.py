@@ -11,6 +11,7 @@ outside it is a lower bound; over several pieces the smallest counts.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from scipy.spatial import ConvexHull
@@ -39,24 +40,39 @@ class HullPlanes:
 
     def signed_distance(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(..., 3) object-frame points -> (signed distance (...), index of the closest face plane (...))."""
-        values = points @ self.normals.T + self.offsets
-        stops = self.piece_starts[1:] + (len(self.normals),)
-        best_dist = best_face = None
-        for start, stop in zip(self.piece_starts, stops, strict=True):  # the nearest face of each piece
-            face = values[..., start:stop].argmax(axis=-1) + start
-            dist = np.take_along_axis(values, face[..., None], axis=-1)[..., 0]
-            if best_dist is None:
-                best_dist, best_face = dist, face
-            else:  # the nearest piece
-                closer = dist < best_dist
-                best_dist, best_face = np.where(closer, dist, best_dist), np.where(closer, face, best_face)
-        return best_dist, best_face
+        values = self.plane_values(points)
+        starts = np.asarray(self.piece_starts)
+        per_piece = np.maximum.reduceat(values, starts, axis=-1)  # each piece's nearest face
+        piece = per_piece.argmin(axis=-1)  # the nearest piece (the first of equals)
+        dist = np.take_along_axis(per_piece, piece[..., None], axis=-1)[..., 0]
+        stops = np.append(starts[1:], len(self.normals))
+        face = np.empty(piece.shape, dtype=np.int64)
+        for k in np.unique(piece):  # the nearest face of the nearest piece
+            rows = piece == k
+            face[rows] = values[rows, starts[k]:stops[k]].argmax(axis=-1) + starts[k]
+        return dist, face
+
+    def plane_values(self, points: np.ndarray) -> np.ndarray:
+        """(..., K) n . x + d of each point and plane, one outer product per axis: a BLAS matrix product
+        (points @ normals.T) of this size ran 10-60x slower when its threads had to share the CPU (a training
+        beside the retarget), and this is the retarget's innermost product."""
+        points = np.asarray(points, dtype=np.float64)
+        nx, ny, nz = self._normal_columns
+        values = np.multiply.outer(points[..., 0], nx)
+        values += np.multiply.outer(points[..., 1], ny)
+        values += np.multiply.outer(points[..., 2], nz)
+        values += self.offsets
+        return values
+
+    @cached_property
+    def _normal_columns(self) -> np.ndarray:
+        return np.ascontiguousarray(self.normals.T)
 
     def ray_entry(self, points: np.ndarray, direction: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Where rays from object-frame `points` (..., 3) along unit `direction` (broadcastable to them) first enter
         the shape: (distance along the ray (...), inf where none enters; index of the face plane entered (...), -1
         where none or where the point is already inside)."""
-        values = points @ self.normals.T + self.offsets  # <= 0 inside each plane
+        values = self.plane_values(points)  # <= 0 inside each plane
         rate = np.broadcast_to(direction, points.shape) @ self.normals.T
         with np.errstate(divide="ignore", invalid="ignore"):
             cross = -values / rate

@@ -65,6 +65,21 @@ def test_ray_entry_finds_the_underside_above_a_point():
     assert np.isinf(rise[0])  # sideways under the top: the leg is not in the way (y 0)
 
 
+def test_signed_distance_is_the_nearest_piece_of_each_pieces_nearest_face():
+    """The vectorised distance equals its definition, piece by piece, for any leading shape (ties: first piece)."""
+    rng = np.random.default_rng(0)
+    pts = rng.uniform(-0.5, 0.8, size=(4, 25, 3))
+    values = pts @ TABLE.normals.T + TABLE.offsets
+    top, leg = values[..., :TABLE.piece_starts[1]], values[..., TABLE.piece_starts[1]:]
+    expected = np.minimum(top.max(-1), leg.max(-1))
+    expected_face = np.where(leg.max(-1) < top.max(-1), leg.argmax(-1) + TABLE.piece_starts[1], top.argmax(-1))
+    dist, face = TABLE.signed_distance(pts)
+    np.testing.assert_allclose(dist, expected, atol=1e-12)
+    np.testing.assert_array_equal(face, expected_face)
+    one, one_face = TABLE.signed_distance(pts[1, 2])
+    assert one.shape == () and one == pytest.approx(dist[1, 2]) and int(one_face) == face[1, 2]
+
+
 def test_fingertips_under_a_tabletop_move_onto_its_underside_and_no_others():
     from robot_hoi.retarget.targets import fingertips_to_underside
 
