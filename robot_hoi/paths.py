@@ -34,3 +34,12 @@ def shared_dir() -> Path | None:
     else:
         return None
     return path if path.is_dir() else None
+
+
+def cache_dir() -> Path:
+    """Where results that take long to compute and never change for the same inputs are kept between runs (e.g.
+    object convex decompositions): ROBOT_HOI_CACHE, else $XDG_CACHE_HOME/robot-hoi, else ~/.cache/robot-hoi."""
+    env = os.environ.get("ROBOT_HOI_CACHE")
+    if env:
+        return Path(env)
+    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "robot-hoi"

@@ -9,6 +9,14 @@ import pytest
 from robot_hoi.paths import shared_dir
 
 
+@pytest.fixture(scope="session", autouse=True)
+def _cache_of_this_session(tmp_path_factory):
+    """Kept results (object decompositions) go to a folder of this test session: none are read from the user's."""
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setenv("ROBOT_HOI_CACHE", str(tmp_path_factory.mktemp("cache")))
+        yield
+
+
 @pytest.fixture(scope="session")
 def shared() -> Path:
     path = shared_dir()

@@ -23,10 +23,14 @@ DEFAULT_NUM_SAMPLE_POINTS = 340  # what InterMimic ships per object
 # Convex decomposition (CoACD) of meshes that are not convex (a table's top over its legs, a chair): what the
 # simulation collides with when the task asks for object_collision "decomposed". Threshold = CoACD's concavity
 # tolerance (fraction of the mesh's size). Coarser search settings than CoACD's defaults (which take 17 s on
-# largetable for the same pieces): largetable 6 pieces in 3 s, woodchair 16 in 5 s.
+# largetable for the same pieces): largetable 6 pieces in 3 s, woodchair 16 in 5 s (idle CPU; 5-8 s and 9-14 s,
+# plasticbox 14-20 s, beside a training). Deterministic (seed 0), so each result is kept on disk
+# (paths.cache_dir()/convex_parts, by mesh content, these settings and CoACD's version) and made once per machine.
 OBJECT_COLLISIONS = ("hull", "decomposed")  # what an object collides as: its convex hull, or its convex pieces
 DECOMPOSITION_THRESHOLD = 0.1
 DECOMPOSITION_MAX_PARTS = 16
+_COACD = {"threshold": DECOMPOSITION_THRESHOLD, "max_convex_hull": DECOMPOSITION_MAX_PARTS,
+          "preprocess_resolution": 30, "resolution": 1000, "mcts_iterations": 60, "seed": 0}
 _DECOMPOSITIONS: dict[str, list[np.ndarray]] = {}  # by mesh content: envs and the retarget share one decomposition
 
 DENSE_SAMPLES = 6000  # for distance queries: ~1.5 cm spacing on a 0.5 m box
@@ -70,7 +74,8 @@ class ObjectAsset:
                              + np.ascontiguousarray(self.faces).tobytes()).hexdigest()
         if key not in _DECOMPOSITIONS:
             convex = self.to_trimesh().is_convex
-            _DECOMPOSITIONS[key] = [self.hull_vertices()] if convex else _decompose(self.vertices, self.faces)
+            _DECOMPOSITIONS[key] = [self.hull_vertices()] if convex else _stored_decomposition(key, self.vertices,
+                                                                                               self.faces)
         return [v.copy() for v in _DECOMPOSITIONS[key]]
 
     def collision_pieces(self, object_collision: str) -> list[np.ndarray]:
@@ -114,9 +119,43 @@ def _decompose(vertices: np.ndarray, faces: np.ndarray) -> list[np.ndarray]:
 
     coacd.set_log_level("error")
     parts = coacd.run_coacd(coacd.Mesh(np.asarray(vertices, dtype=np.float64), np.asarray(faces, dtype=np.int64)),
-                            threshold=DECOMPOSITION_THRESHOLD, max_convex_hull=DECOMPOSITION_MAX_PARTS,
-                            preprocess_resolution=30, resolution=1000, mcts_iterations=60, seed=0)
+                            **_COACD)
     return [np.asarray(v, dtype=np.float64) for v, _ in parts if len(v) >= 4]
+
+
+def decomposition_file(mesh_key: str) -> Path:
+    """Where the decomposition of the mesh with content hash `mesh_key` is kept: named by that hash, the CoACD
+    settings and CoACD's version, so a change of any of them makes a new file."""
+    import hashlib
+    from importlib.metadata import version
+
+    from robot_hoi.paths import cache_dir
+
+    recipe = hashlib.sha256(repr((sorted(_COACD.items()), version("coacd"))).encode()).hexdigest()
+    return cache_dir() / "convex_parts" / f"{mesh_key[:32]}-{recipe[:12]}.npz"
+
+
+def _stored_decomposition(mesh_key: str, vertices: np.ndarray, faces: np.ndarray) -> list[np.ndarray]:
+    """The decomposition from its file, else made (CoACD) and written there (atomically; an unwritable cache
+    folder only costs the time next run)."""
+    import os
+    import zipfile
+
+    path = decomposition_file(mesh_key)
+    try:
+        with np.load(path, allow_pickle=False) as stored:
+            return [stored[f"part{i}"] for i in range(len(stored.files))]
+    except (OSError, ValueError, KeyError, zipfile.BadZipFile):
+        pass  # missing, or unreadable: made (again) and written
+    parts = _decompose(vertices, faces)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        partial = path.with_name(f"{path.stem}.{os.getpid()}.tmp.npz")
+        np.savez(partial, **{f"part{i}": v for i, v in enumerate(parts)})
+        os.replace(partial, path)
+    except OSError:
+        pass
+    return parts
 
 
 def default_objects_dir(clip_path: Path) -> Path:

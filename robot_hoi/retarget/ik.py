@@ -316,17 +316,19 @@ class IKSolver:
         if depth > 0:
             q[self.model.jnt_qposadr[self.free_joint] + 2] += depth
 
-    def _probe_depths(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Hand probes vs this frame's object: (world points, depth = radius - hull distance, face normals)."""
+    def _probe_depths(self, down_to: float | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Hand probes vs this frame's object: (world points, depth = radius - hull distance, face normals).
+        `down_to` (m): depths below -down_to need not be exact (the hull's broad phase; they stay below it)."""
         hull, pos, rot = self._object
         world = self._probe_world()
-        dist, face = hull.signed_distance((world - pos) @ rot)
+        within = None if down_to is None else float(self.probes.radius.max()) + down_to
+        dist, face = hull.signed_distance((world - pos) @ rot, within)
         return world, self.probes.radius - dist, hull.normals[face] @ rot.T
 
     def _add_object_rows(self, H: np.ndarray, g: np.ndarray) -> None:
         if self._object is None or self.probes is None or not len(self.probes):
             return
-        world, depth, normals = self._probe_depths()
+        world, depth, normals = self._probe_depths(self.settings.object_margin)
         # hand probes resist from the margin (no chatter at the grip); arm probes only once inside, so a forearm
         # resting near the object leaves the solution as it was
         margin = np.where(self.probes.hand, self.settings.object_margin, 0.0)
@@ -483,7 +485,7 @@ class IKSolver:
                 sole_min[t] = self._sole_world()[:, 2].min()
             if object_track is not None and self.probes is not None and len(self.probes):
                 self._object = self._object_at(object_track, t)
-                penetration[t] = max(float(self._probe_depths()[1].max()), 0.0)
+                penetration[t] = max(float(self._probe_depths(0.0)[1].max()), 0.0)
             if self.probes is not None and len(self.probes):
                 hand_floor[t] = max(float(self._hand_floor_depths()[1].max()), 0.0)
         self._object = None

@@ -11,6 +11,7 @@ outside it is a lower bound; over several pieces the smallest counts.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import mujoco
 import numpy as np
@@ -38,26 +39,57 @@ class HullPlanes:
         eq = np.concatenate(eqs)
         return cls(normals=eq[:, :3].copy(), offsets=eq[:, 3].copy(), piece_starts=starts)
 
-    def signed_distance(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(..., 3) object-frame points -> (signed distance (...), index of the closest face plane (...))."""
-        values = points @ self.normals.T + self.offsets
+    def signed_distance(self, points: np.ndarray, within: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """(..., 3) object-frame points -> (signed distance (...), index of the closest face plane (...)).
+
+        `within` (m): the broad phase, for callers that only ask which points are closer than that. Each piece's
+        outline (its planes facing the 26 directions of a cube's faces, edges and corners) bounds its distance from
+        below; only points whose bound is below `within` are measured against every plane. So the result is exact
+        where the distance is below `within`, and elsewhere a lower bound of it that is itself >= `within`."""
+        points = np.asarray(points, dtype=np.float64)
+        if within is None:
+            return self._nearest(points, self._planes)
+        dist, face = self._nearest(points, self._outline)
+        near = dist < within
+        if near.any():
+            dist[near], face[near] = self._nearest(points[near], self._planes)
+        return dist, face
+
+    def plane_values(self, points: np.ndarray) -> np.ndarray:
+        """(..., K) n . x + d of each point and plane."""
+        return _plane_values(np.asarray(points, dtype=np.float64), self._planes)
+
+    @cached_property
+    def _planes(self) -> _PlaneSet:
+        return _PlaneSet.of(self, np.arange(len(self.normals)))
+
+    @cached_property
+    def _outline(self) -> _PlaneSet:
+        """Per piece, the planes facing the 26 directions of a 3x3x3 grid (max n . direction)."""
+        grid = np.array([(x, y, z) for x in (-1, 0, 1) for y in (-1, 0, 1) for z in (-1, 0, 1) if x or y or z], float)
         stops = self.piece_starts[1:] + (len(self.normals),)
-        best_dist = best_face = None
-        for start, stop in zip(self.piece_starts, stops, strict=True):  # the nearest face of each piece
-            face = values[..., start:stop].argmax(axis=-1) + start
-            dist = np.take_along_axis(values, face[..., None], axis=-1)[..., 0]
-            if best_dist is None:
-                best_dist, best_face = dist, face
-            else:  # the nearest piece
-                closer = dist < best_dist
-                best_dist, best_face = np.where(closer, dist, best_dist), np.where(closer, face, best_face)
-        return best_dist, best_face
+        keep = [np.unique(start + (self.normals[start:stop] @ grid.T).argmax(axis=0))
+                for start, stop in zip(self.piece_starts, stops, strict=True)]
+        return _PlaneSet.of(self, np.concatenate(keep))
+
+    def _nearest(self, points: np.ndarray, planes: _PlaneSet) -> tuple[np.ndarray, np.ndarray]:
+        """Distance and face over a set of planes: each piece's nearest face (max), then the nearest piece (min)."""
+        values = _plane_values(points, planes)
+        per_piece = np.maximum.reduceat(values, planes.starts, axis=-1)
+        piece = per_piece.argmin(axis=-1)  # the first of equals
+        dist = np.take_along_axis(per_piece, piece[..., None], axis=-1)[..., 0]
+        stops = np.append(planes.starts[1:], len(planes.index))
+        face = np.empty(piece.shape, dtype=np.int64)
+        for k in np.unique(piece):
+            rows = piece == k
+            face[rows] = values[rows, planes.starts[k]:stops[k]].argmax(axis=-1) + planes.starts[k]
+        return dist, planes.index[face]
 
     def ray_entry(self, points: np.ndarray, direction: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Where rays from object-frame `points` (..., 3) along unit `direction` (broadcastable to them) first enter
         the shape: (distance along the ray (...), inf where none enters; index of the face plane entered (...), -1
         where none or where the point is already inside)."""
-        values = points @ self.normals.T + self.offsets  # <= 0 inside each plane
+        values = self.plane_values(points)  # <= 0 inside each plane
         rate = np.broadcast_to(direction, points.shape) @ self.normals.T
         with np.errstate(divide="ignore", invalid="ignore"):
             cross = -values / rate
@@ -81,10 +113,39 @@ class HullPlanes:
         """Points closer than `clearance` to the shape (or inside it) moved out along the nearest face normal
         (of the nearest piece; a second pass for a point pushed into a neighbouring piece)."""
         for _ in range(1 if len(self.piece_starts) == 1 else 2):
-            dist, face = self.signed_distance(points)
+            dist, face = self.signed_distance(points, within=clearance)
             gap = np.maximum(clearance - dist, 0.0)
             points = points + gap[..., None] * self.normals[face]
         return points
+
+
+@dataclass(frozen=True)
+class _PlaneSet:
+    """Some of a HullPlanes' planes, piece by piece: normals as three contiguous columns, offsets, where each
+    piece starts, and each plane's row in the HullPlanes."""
+
+    columns: np.ndarray  # (3, M)
+    offsets: np.ndarray  # (M,)
+    starts: np.ndarray  # (pieces,)
+    index: np.ndarray  # (M,)
+
+    @classmethod
+    def of(cls, planes: HullPlanes, index: np.ndarray) -> _PlaneSet:
+        piece = np.searchsorted(planes.piece_starts, index, side="right") - 1  # index is sorted, every piece in it
+        return cls(np.ascontiguousarray(planes.normals[index].T), planes.offsets[index],
+                   np.searchsorted(piece, np.arange(len(planes.piece_starts))), index)
+
+
+def _plane_values(points: np.ndarray, planes: _PlaneSet) -> np.ndarray:
+    """(..., M) n . x + d, one outer product per axis: a BLAS matrix product (points @ normals.T) of this size ran
+    10-60x slower when its threads had to share the CPU (a training beside the retarget), and this is the
+    retarget's innermost product."""
+    nx, ny, nz = planes.columns
+    values = np.multiply.outer(points[..., 0], nx)
+    values += np.multiply.outer(points[..., 1], ny)
+    values += np.multiply.outer(points[..., 2], nz)
+    values += planes.offsets
+    return values
 
 
 @dataclass(frozen=True)

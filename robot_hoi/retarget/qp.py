@@ -52,6 +52,9 @@ class QPSettings:
     object_clearance: float = 0.006
     foot_tolerance: float = 0.001    # m (position) and rad (orientation) a stance foot may move from its landing
     solver: str = "daqp"             # qpsolvers backend
+    # rad or m: a frame's iterations stop once no coordinate moves more than this in one (converged); larger
+    # values save few iterations: the per-iteration speed limit binds on most frames (docs/experiments/retarget_gate.md)
+    step_tolerance: float = 1e-6
 
 
 class QPRetargeter:
@@ -124,7 +127,7 @@ class QPRetargeter:
         ik = self.ik
         if ik._object is None or ik.probes is None or not len(ik.probes):
             return None
-        world, depth, normals = ik._probe_depths()  # depth = radius - distance
+        world, depth, normals = ik._probe_depths(self.settings.contact_distance)  # depth = radius - distance
         near = np.flatnonzero(depth > -self.settings.contact_distance)
         if not len(near):
             return None
@@ -214,7 +217,7 @@ class QPRetargeter:
                 mujoco.mj_integratePos(self.model, q, full, 1.0)
                 q[ik._lim_qadr] = np.clip(q[ik._lim_qadr], ik._lim_lo, ik._lim_hi)
                 iters[t] += 1
-                if np.abs(dq).max() < 1e-6:
+                if np.abs(dq).max() < s.step_tolerance:
                     break
             qpos[t] = q
             self.data.qpos[:] = q

@@ -103,7 +103,7 @@ def _hands_in_object(result) -> dict:
     cols = [i for i, h in enumerate(names) if hand_side(h) is not None]
     local = to_object_frame(targets.human_pos[:, cols], targets.human_object_pos,
                             wxyz_to_xyzw(targets.object_quat_wxyz))
-    human_depth = np.maximum(-targets.object_hull.signed_distance(local)[0].min(axis=1), 0.0)
+    human_depth = np.maximum(-targets.object_hull.signed_distance(local, within=0.0)[0].min(axis=1), 0.0)
     return {
         "robot_max_cm": _cm(ik.object_penetration.max()),
         "robot_frames_over_1cm": int((ik.object_penetration > 0.01).sum()),

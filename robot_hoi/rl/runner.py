@@ -11,7 +11,6 @@ runner.eval_interval: eval_curve.jsonl (one row per evaluation) and model_best.p
 
 from __future__ import annotations
 
-import contextlib
 import json
 import time
 from collections import deque
@@ -41,6 +40,7 @@ from robot_hoi.rl.models import ActorCritic
 from robot_hoi.rl.ppo import PPO
 from robot_hoi.rl.progress import progress_text, training_progress
 from robot_hoi.rl.step_log import StepLog
+from robot_hoi.utils.threads import torch_threads
 from robot_hoi.utils.timing import OFF
 
 _PPO_SCALARS = {
@@ -57,18 +57,6 @@ _PPO_SCALARS = {
     "actor_lr": "LR/actor",
     "critic_lr": "LR/critic",
 }
-
-
-@contextlib.contextmanager
-def _torch_threads(count: int | None):
-    """torch's CPU thread count set to `count` inside the block (unchanged for None)."""
-    before = torch.get_num_threads()
-    if count is not None:
-        torch.set_num_threads(count)
-    try:
-        yield
-    finally:
-        torch.set_num_threads(before)
 
 
 class OnPolicyRunner:
@@ -195,7 +183,7 @@ class OnPolicyRunner:
             self.timers.lap("logging")  # the rollout's one read-back of its log values
             env_logs.update(curriculum)
             t1 = time.monotonic()
-            with _torch_threads(self._update_threads()):
+            with torch_threads(self._update_threads()):
                 stats = self.alg.update()
             t2 = time.monotonic()
             self.timers.lap("update")

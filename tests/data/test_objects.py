@@ -101,3 +101,20 @@ def test_shared_object_without_its_obj_inspects_retargets_and_trains(motions, tm
     assert "object largebox from convex hull" in capsys.readouterr().out
     task = (tmp_path / "run").rglob("task.json").__next__().read_text()
     assert objects in task  # eval / export / sim2sim reload the same object
+
+
+def test_a_decomposition_is_made_once_and_read_back_from_the_cache(table_object, monkeypatch):
+    """CoACD runs once per mesh and settings; later processes (here: the in-process memo emptied) read its file."""
+    from robot_hoi.data import objects
+    from robot_hoi.data.objects import ObjectAsset
+
+    table = ObjectAsset(name="table", vertices=table_object.vertices + [0.0, 0.0, 1e-3], faces=table_object.faces,
+                        sample_points=table_object.sample_points)  # a mesh of its own: not memoised by another test
+    folder = objects.decomposition_file("0").parent
+    before = set(folder.glob("*.npz"))
+    made = table.convex_parts()
+    assert len(made) > 1 and len(set(folder.glob("*.npz")) - before) == 1  # its file
+    monkeypatch.setattr(objects, "_DECOMPOSITIONS", {})
+    monkeypatch.setattr(objects, "_decompose", lambda *a: pytest.fail("decomposed again"))
+    again = table.convex_parts()
+    assert len(again) == len(made) and all(np.array_equal(a, b) for a, b in zip(again, made, strict=True))

@@ -65,6 +65,38 @@ def test_ray_entry_finds_the_underside_above_a_point():
     assert np.isinf(rise[0])  # sideways under the top: the leg is not in the way (y 0)
 
 
+def test_signed_distance_is_the_nearest_piece_of_each_pieces_nearest_face():
+    """The vectorised distance equals its definition, piece by piece, for any leading shape (ties: first piece)."""
+    rng = np.random.default_rng(0)
+    pts = rng.uniform(-0.5, 0.8, size=(4, 25, 3))
+    values = pts @ TABLE.normals.T + TABLE.offsets
+    top, leg = values[..., :TABLE.piece_starts[1]], values[..., TABLE.piece_starts[1]:]
+    expected = np.minimum(top.max(-1), leg.max(-1))
+    expected_face = np.where(leg.max(-1) < top.max(-1), leg.argmax(-1) + TABLE.piece_starts[1], top.argmax(-1))
+    dist, face = TABLE.signed_distance(pts)
+    np.testing.assert_allclose(dist, expected, atol=1e-12)
+    np.testing.assert_array_equal(face, expected_face)
+    one, one_face = TABLE.signed_distance(pts[1, 2])
+    assert one.shape == () and one == pytest.approx(dist[1, 2]) and int(one_face) == face[1, 2]
+
+
+def test_the_broad_phase_is_exact_within_its_range_and_a_lower_bound_beyond():
+    rng = np.random.default_rng(1)
+    pieces = [rng.normal(size=(40, 3)) * 0.1 + centre for centre in ((0, 0, 0), (0.3, 0, 0), (0, 0.4, 0.2))]
+    planes = HullPlanes.from_pieces(pieces)
+    pts = rng.uniform(-0.6, 0.8, size=(400, 3))
+    exact, exact_face = planes.signed_distance(pts)
+    for within in (0.0, 0.05, 0.2):
+        dist, face = planes.signed_distance(pts, within)
+        near = exact < within
+        assert 0 < near.sum() < len(pts)
+        np.testing.assert_array_equal(dist[near], exact[near])
+        np.testing.assert_array_equal(face[near], exact_face[near])
+        assert (dist[~near] >= within).all() and (dist[~near] <= exact[~near] + 1e-12).all()
+    one, _ = planes.signed_distance(pts[0], 0.05)
+    assert one.shape == ()
+
+
 def test_fingertips_under_a_tabletop_move_onto_its_underside_and_no_others():
     from robot_hoi.retarget.targets import fingertips_to_underside
 

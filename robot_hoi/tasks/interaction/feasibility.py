@@ -25,6 +25,7 @@ import torch
 
 from robot_hoi.tasks.interaction import factory
 from robot_hoi.tasks.interaction.env_cfg import RandomizationCfg
+from robot_hoi.utils.threads import torch_threads
 
 SIDES = ("left", "right")
 
@@ -72,8 +73,11 @@ def physics_gate(clip, env_cfg, embodiment, motion=None, lead_frames: int = 10) 
     """The gate on one clip (its retarget `motion` when at hand, else retargeted with the task's settings); see
     `replay` for the result."""
     cfg = gate_config(env_cfg)
-    env = factory.make_env([clip], cfg, embodiment, motions=[motion] if motion is not None else None)
-    return replay(env, lead_frames)
+    # one env: torch's threads have nothing to share, and beside a training each small op waited on them (the gate
+    # of sub8_largebox_000 took 1.6 s with 2 threads, 0.14 s with 1)
+    with torch_threads(1):
+        env = factory.make_env([clip], cfg, embodiment, motions=[motion] if motion is not None else None)
+        return replay(env, lead_frames)
 
 
 def replay(env, lead_frames: int = 10) -> dict:
