@@ -8,7 +8,9 @@ A clip's object pose maps local points to world: world = R(quat_xyzw).apply(p_lo
 from __future__ import annotations
 
 import hashlib
+import zipfile
 from dataclasses import dataclass, field
+from importlib.metadata import version
 from pathlib import Path
 
 import numpy as np
@@ -16,8 +18,10 @@ import trimesh
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
+from deploy.atomic import atomic_path
 from robot_hoi.data.object_urdf import read_mesh, urdf_geometry
 from robot_hoi.errors import DataError
+from robot_hoi.paths import cache_dir
 
 DEFAULT_NUM_SAMPLE_POINTS = 340  # what InterMimic ships per object
 # Convex decomposition (CoACD) of meshes that are not convex (a table's top over its legs, a chair): what the
@@ -126,11 +130,6 @@ def _decompose(vertices: np.ndarray, faces: np.ndarray) -> list[np.ndarray]:
 def decomposition_file(mesh_key: str) -> Path:
     """Where the decomposition of the mesh with content hash `mesh_key` is kept: named by that hash, the CoACD
     settings and CoACD's version, so a change of any of them makes a new file."""
-    import hashlib
-    from importlib.metadata import version
-
-    from robot_hoi.paths import cache_dir
-
     recipe = hashlib.sha256(repr((sorted(_COACD.items()), version("coacd"))).encode()).hexdigest()
     return cache_dir() / "convex_parts" / f"{mesh_key[:32]}-{recipe[:12]}.npz"
 
@@ -138,9 +137,6 @@ def decomposition_file(mesh_key: str) -> Path:
 def _stored_decomposition(mesh_key: str, vertices: np.ndarray, faces: np.ndarray) -> list[np.ndarray]:
     """The decomposition from its file, else made (CoACD) and written there (atomically; an unwritable cache
     folder only costs the time next run)."""
-    import os
-    import zipfile
-
     path = decomposition_file(mesh_key)
     try:
         with np.load(path, allow_pickle=False) as stored:
@@ -149,10 +145,8 @@ def _stored_decomposition(mesh_key: str, vertices: np.ndarray, faces: np.ndarray
         pass  # missing, or unreadable: made (again) and written
     parts = _decompose(vertices, faces)
     try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        partial = path.with_name(f"{path.stem}.{os.getpid()}.tmp.npz")
-        np.savez(partial, **{f"part{i}": v for i, v in enumerate(parts)})
-        os.replace(partial, path)
+        with atomic_path(path) as partial:
+            np.savez(partial, **{f"part{i}": v for i, v in enumerate(parts)})
     except OSError:
         pass
     return parts
