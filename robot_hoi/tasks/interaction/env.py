@@ -148,11 +148,16 @@ class InteractionEnv:
         self.ref_link_pos, self.ref_link_quat = cat("link_pos"), cat("link_quat_wxyz")
         self.ref_d_hat, self.ref_hand_contact = cat("d_hat"), cat("hand_contact")
         self.ref_object_pos, self.ref_object_quat = cat("object_pos"), cat("object_quat_wxyz")
-        # the clip's own object path (a grasp may move the reference's): evaluation reports E_o against both
-        source = lambda name, own: torch.cat([own(r) if getattr(r, name) is None else getattr(r, name)  # noqa: E731
-                                              for r in references]).to(self.device)
-        self.source_object_pos = source("source_object_pos", lambda r: r.object_pos)
-        self.source_object_rotmat = quat_to_matrix(source("source_object_quat_wxyz", lambda r: r.object_quat_wxyz))
+        # the clip's own object path, where a planned grasp moved the reference's (None: the same path); evaluation
+        # reports E_o against both
+        moved = [r.source_object_pos is not None and not (torch.equal(r.source_object_pos, r.object_pos) and
+                 torch.equal(r.source_object_quat_wxyz, r.object_quat_wxyz)) for r in references]
+        self.source_object_pos = self.source_object_rotmat = None
+        if any(moved):
+            own = lambda name: torch.cat([getattr(r, f"source_{name}") if m else getattr(r, name)  # noqa: E731
+                                          for r, m in zip(references, moved, strict=True)]).to(self.device)
+            self.source_object_pos = own("object_pos")
+            self.source_object_rotmat = quat_to_matrix(own("object_quat_wxyz"))
         self.ref_object_lin_vel, self.ref_object_ang_vel = cat("object_lin_vel"), cat("object_ang_vel")
         self.ref_robot_qpos, self.ref_robot_qvel = cat("robot_qpos"), cat("robot_qvel")
         self.ref_joint_pos = cat("joint_pos")
@@ -372,9 +377,11 @@ class InteractionEnv:
         body = self.scene.body_link_ids  # E_h excludes hand joints for OMOMO (InterMimic Sec. 4)
         error_h = (self.ref.link_pos[:, body] - self.link_pos[:, body]).norm(dim=-1).mean(-1)
         error_o = (self.object_points_world - self.ref_object_points_world).norm(dim=-1).mean(-1)
-        source_points = object_points_world(self.object_points, self.source_object_pos[self.ref_index],
-                                            self.source_object_rotmat[self.ref_index])
-        error_source = (self.object_points_world - source_points).norm(dim=-1).mean(-1)
+        error_source = error_o
+        if self.source_object_pos is not None:  # only a grasp-moved reference costs the second error
+            source_points = object_points_world(self.object_points, self.source_object_pos[self.ref_index],
+                                                self.source_object_rotmat[self.ref_index])
+            error_source = (self.object_points_world - source_points).norm(dim=-1).mean(-1)
         self.episode_error_h += torch.where(tracking, error_h, 0.0)
         self.episode_error_o += torch.where(tracking, error_o, 0.0)
         self.episode_error_o_source += torch.where(tracking, error_source, 0.0)
