@@ -130,21 +130,31 @@ def hand_geometry(model: mujoco.MjModel, cfg, side: str, link_names, human_names
     probes = hand_probe_points(model, [wrist_id])
     resolved = resolve_links(model, links)
     data, q0 = mujoco.MjData(model), default_qpos(model, cfg)
-    link_local, probe_local = [], []
-    for c in closures:
+
+    def pose(angles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(links (K, 3), probes (N, 3)) in the wrist link's frame with the hand's channels at `angles`."""
         q = q0.copy()
-        q[qadr] = open_rad + c * (closed_rad - open_rad)
+        q[qadr] = angles
         apply_joint_couplings(model, q)
         data.qpos[:] = q
         mujoco.mj_kinematics(model, data)
         rot, origin = data.xmat[wrist_id].reshape(3, 3), data.xpos[wrist_id]
         world = data.xpos[probes.body_ids] + np.einsum("nij,nj->ni", data.xmat[probes.body_ids].reshape(-1, 3, 3),
                                                        probes.local)
-        link_local.append((link_positions(data, resolved) - origin) @ rot)
-        probe_local.append((world - origin) @ rot)
-    link_local, probe_local = np.array(link_local), np.array(probe_local)
-    probe_channel, link_channel = _channels(model, cfg, side, probes, resolved, q0, qadr, open_rad, closed_rad)
-    moves = np.linalg.norm(probe_local[-1] - probe_local[0], axis=-1) > 1e-6
+        return (link_positions(data, resolved) - origin) @ rot, (world - origin) @ rot
+
+    tables = [pose(open_rad + c * (closed_rad - open_rad)) for c in closures]
+    link_local, probe_local = np.array([t[0] for t in tables]), np.array([t[1] for t in tables])
+    # which channel moves each link and probe (-1: none), found by closing one channel at a time
+    open_links, open_probes = pose(open_rad)
+    link_channel, probe_channel = np.full(len(open_links), -1), np.full(len(open_probes), -1)
+    for k in np.flatnonzero(closed_rad != open_rad):
+        angles = open_rad.copy()
+        angles[k] = closed_rad[k]
+        links_k, probes_k = pose(angles)
+        link_channel[np.linalg.norm(links_k - open_links, axis=-1) > 1e-6] = k
+        probe_channel[np.linalg.norm(probes_k - open_probes, axis=-1) > 1e-6] = k
+    moves = probe_channel >= 0
     axis = _unit(probe_local[0][moves].mean(0))
     curl = (probe_local[len(closures) // 3] - probe_local[0])[moves].mean(0)
     normal = _unit(curl - (curl @ axis) * axis)
@@ -156,33 +166,6 @@ def hand_geometry(model: mujoco.MjModel, cfg, side: str, link_names, human_names
     reach = float((probe_local[0][rest] @ normal + probes.radius[rest]).max())
     return HandGeometry(side, tuple(links), closures, link_local, probe_local, probes.radius, moves, axis, normal,
                         thumb, probe_local[0][palm], reach, open_rad, closed_rad, probe_channel, link_channel)
-
-
-def _channels(model, cfg, side, probes, resolved, q0, qadr, open_rad, closed_rad) -> tuple[np.ndarray, np.ndarray]:
-    """(probe_channel, link_channel): which finger channel moves each probe and link (-1: none), found by closing
-    one channel at a time."""
-    data = mujoco.MjData(model)
-
-    def pose(angles):
-        q = q0.copy()
-        q[qadr] = angles
-        apply_joint_couplings(model, q)
-        data.qpos[:] = q
-        mujoco.mj_kinematics(model, data)
-        world = data.xpos[probes.body_ids] + np.einsum("nij,nj->ni", data.xmat[probes.body_ids].reshape(-1, 3, 3),
-                                                       probes.local)
-        return world, link_positions(data, resolved)
-
-    base = pose(open_rad)
-    probe_channel = np.full(len(probes.radius), -1)
-    link_channel = np.full(len(base[1]), -1)
-    for k in np.flatnonzero(closed_rad != open_rad):
-        angles = open_rad.copy()
-        angles[k] = closed_rad[k]
-        moved = pose(angles)
-        probe_channel[np.linalg.norm(moved[0] - base[0], axis=-1) > 1e-6] = k
-        link_channel[np.linalg.norm(moved[1] - base[1], axis=-1) > 1e-6] = k
-    return probe_channel, link_channel
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
