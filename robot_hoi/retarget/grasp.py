@@ -25,8 +25,9 @@ The fingers close through the hand's couplings, each finger on its own: a claw's
 its pad on the face and every other finger until its pad is as near the face as it gets (one pad per hand on one
 line through the object let the box pivot about the grasp axis, 30 degrees in `sub3_largebox_003`'s lift), a
 push's or a hook's fingers each until it first touches the object (HandGeometry.finger_closures); the PD targets
-close them `press` further and move the wrist into the contact (executable.squeeze_offsets), ramped in after the held segment starts (a hand squeezed while arriving
-sticks where it lands) and, for two hands, only while both hold. The wrist and fingertip targets ride with the
+close them `press` further and move the wrist into the contact (executable.squeeze_offsets), ramped in after the
+held segment starts (a hand squeezed while arriving sticks where it lands) and, for two hands, only while both
+hold. The wrist and fingertip targets ride with the
 object's pose, so its path is unchanged; they glide from the human's over `blend_s` before a held segment (in
 along the face normal from `approach_m` out) and back after it. With a known or density-based object mass the
 load offsets carry its weight in the gripping hands.
