@@ -226,7 +226,9 @@ class OnPolicyRunner:
             model.train(was_training)
         row = {"step": self.iteration, "samples": self.total_samples, "train_time_s": round(self.total_time_s, 1),
                "eval_s": round(time.monotonic() - started, 2), **metrics}
-        row["best"] = self.best_eval is None or eval_rank(metrics) > eval_rank(self.best_eval)
+        # a best validated otherwise (a run resumed with other settings) is not compared with: this row replaces it
+        comparable = self.best_eval is not None and self.best_eval.get("validation") == metrics.get("validation")
+        row["best"] = not comparable or eval_rank(metrics) > eval_rank(self.best_eval)
         if row["best"]:
             self.best_eval = row
             if self.log_dir is not None:

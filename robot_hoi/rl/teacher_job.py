@@ -41,7 +41,9 @@ from robot_hoi.rl.evaluation import (
     evaluate,
     load_protocol,
     protocol_env_cfg,
+    selection_env_cfg,
     summarise,
+    validation_label,
 )
 from robot_hoi.rl.runner import OnPolicyRunner
 from robot_hoi.sim.device import check_gpu_memory, policy_device, resolve_env_cfg
@@ -150,9 +152,10 @@ def train_teacher_group(job: TeacherJob, clips: list | None = None, log=print,
         # score eval reports is not the one model_best.pt was picked on; envs built once and re-seeded: every
         # checkpoint meets the same starts
         validation_seed = VALIDATION_SEED + job.eval_seed
-        validation = evaluation_envs(clips, env_cfg, embodiment, run_dir / "references",
-                                     job.train_cfg.runner.eval_episodes, validation_seed)
-        runner.evaluator = lambda model: summarise(evaluate_envs(validation, model, validation_seed))
+        validation = evaluation_envs(clips, selection_env_cfg(env_cfg, job.train_cfg.runner.eval_episodes,
+                                                              validation_seed), embodiment, run_dir / "references")
+        runner.evaluator = lambda model: {**summarise(evaluate_envs(validation, model, validation_seed)),
+                                          **validation_label(env_cfg)}
         runner.on_evaluation = lambda row: log(
             f"[{job.group}] eval at it {row['step']} ({row['train_time_s'] / 60:.1f} min): success "
             f"{row['success_rate']:.2f}, duration {row['duration_s']:.2f} s, E_h {row['E_h_cm']:.1f} cm, E_o "
@@ -188,7 +191,8 @@ def train_teacher_group(job: TeacherJob, clips: list | None = None, log=print,
     checkpoint = checkpoint if checkpoint.exists() else latest_checkpoint(run_dir)
 
     # robot-hoi eval's default protocol and seeds, in envs of the training env's (resolved) config
-    envs = evaluation_envs(clips, env_cfg, embodiment, run_dir / "references", job.eval_episodes, job.eval_seed)
+    eval_cfg = protocol_env_cfg(env_cfg, load_protocol(DEFAULT_PROTOCOL)[1], job.eval_episodes, job.eval_seed)
+    envs = evaluation_envs(clips, eval_cfg, embodiment, run_dir / "references")
     evaluation = _evaluation_record(evaluate_envs(envs, runner.model.eval(), job.eval_seed), job)
     evaluation.update(group=job.group, checkpoint=checkpoint.name if checkpoint else None,
                       iteration=runner.iteration)
@@ -218,11 +222,10 @@ def train_teacher_group(job: TeacherJob, clips: list | None = None, log=print,
     }
 
 
-def evaluation_envs(clips: list, env_cfg, embodiment, cache: Path, episodes: int, seed: int) -> dict[str, Any]:
-    """One env per clip under the default evaluation protocol (robot_hoi.rl.evaluation), from the training env's
-    (resolved) config: where the model is."""
-    cfg = protocol_env_cfg(env_cfg, load_protocol(DEFAULT_PROTOCOL)[1], episodes, seed)
-    return {clip.name: factory.make_env([clip], cfg, embodiment, cache=cache) for clip in clips}
+def evaluation_envs(clips: list, eval_cfg, embodiment, cache: Path) -> dict[str, Any]:
+    """One env per clip from an evaluation config (protocol_env_cfg or selection_env_cfg of the training env's
+    resolved config: where the model is)."""
+    return {clip.name: factory.make_env([clip], eval_cfg, embodiment, cache=cache) for clip in clips}
 
 
 def evaluate_envs(envs: dict[str, Any], model, seed: int) -> dict[str, dict]:

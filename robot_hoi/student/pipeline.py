@@ -35,7 +35,13 @@ from robot_hoi.errors import UserError
 from robot_hoi.rl.budget import Budget, parse_budget
 from robot_hoi.rl.checkpoint import latest_checkpoint
 from robot_hoi.rl.eval_curve import EVAL_CURVE_FILE, read_curve
-from robot_hoi.rl.evaluation import DEFAULT_PROTOCOL, VALIDATION_SEED, load_protocol, summarise
+from robot_hoi.rl.evaluation import (
+    DEFAULT_PROTOCOL,
+    VALIDATION_SEED,
+    selection_env_cfg,
+    summarise,
+    validation_label,
+)
 from robot_hoi.sim.device import physics_device, resolve_env_cfg
 from robot_hoi.student import complexmimic, skillmimic
 from robot_hoi.student.config import DEFAULT_PRESET, PRESETS, StudentTrainConfig, load_student_config
@@ -343,10 +349,9 @@ def validation_evaluator(setup: Setup, runner, keep: list[int]):
     starts. The runner keeps the best as model_best.pt."""
     seed = VALIDATION_SEED + setup.cfg.seed
     episodes = setup.cfg.runner.eval_episodes
-    protocol = load_protocol(DEFAULT_PROTOCOL)[1]
     envs = {}
     for k, i in enumerate(keep):
-        env = InteractionEnv(evaluation_cfg(setup.env_cfg, episodes, seed, protocol), setup.scene,
+        env = InteractionEnv(selection_env_cfg(setup.env_cfg, episodes, seed), setup.scene,
                              [runner.env.env.references[k]])
         envs[setup.clips[i].name] = StudentEnv(env, fresh_providers(runner.env.providers, episodes))
     groups = runner.cfg.runner.actor_obs_groups
@@ -356,7 +361,7 @@ def validation_evaluator(setup: Setup, runner, keep: list[int]):
         for name, env in envs.items():
             env.env.generator.manual_seed(seed)
             results[name] = evaluate_groups(env, model, groups)
-        return summarise(results)
+        return {**summarise(results), **validation_label(setup.env_cfg)}
 
     return evaluator
 
@@ -382,6 +387,7 @@ def selection_record(folder: Path, cfg: StudentTrainConfig) -> dict | None:
         "rule": "the best validation evaluation (eval_curve.eval_rank: success, interaction success, tracked "
                 "duration)",
         "validation": {"protocol": DEFAULT_PROTOCOL, "seed": VALIDATION_SEED + cfg.seed,
+                       "randomization": rows[i].get("validation", "none (the protocol's starts only)"),
                        "episodes_per_clip": cfg.runner.eval_episodes, "every_iterations": cfg.runner.eval_interval},
         "weights": (f"exponential moving average, decay {cfg.stability.ema_decay}" if cfg.stability.ema_decay > 0
                     else "the trained weights (no average)"),

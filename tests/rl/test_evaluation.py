@@ -175,3 +175,28 @@ def test_committed_results_are_what_their_records_give():
     assert (RESULTS_DIR / "README.md").read_text() == render(records)
     readme = (REPO_ROOT / "README.md").read_text()
     assert readme == fill_blocks(readme, records)
+
+
+def test_model_selection_validates_under_the_training_randomization():
+    import yaml
+
+    from robot_hoi.paths import CONFIGS_DIR, TASK_CONFIG
+    from robot_hoi.rl.evaluation import selection_env_cfg, validation_label
+    from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg, RandomizationCfg
+    from robot_hoi.utils.config import apply_overrides, load_yaml_dataclass
+
+    task = load_yaml_dataclass(InteractionEnvCfg, TASK_CONFIG)
+    assert not task.randomization.is_on()
+    plain = selection_env_cfg(task, episodes=8, seed=100_000)
+    assert plain.randomization == RandomizationCfg() and plain.num_envs == 8 and not plain.assist.enabled
+    assert validation_label(task) == {}
+
+    hardware = yaml.safe_load((CONFIGS_DIR / "recipes" / "hardware.yaml").read_text())["env"]["randomization"]
+    trained = apply_overrides(task, [f"randomization.{k}={v}" for k, v in hardware.items()], "--set")
+    assert trained.randomization.is_on()
+    picked = selection_env_cfg(trained, episodes=8, seed=100_000)
+    assert tuple(picked.randomization.object_mass_scale) == (0.5, 2.0)
+    assert picked.randomization.push_velocity == 0.6 and not picked.assist.enabled
+    assert validation_label(trained) == {"validation": "training randomization"}
+    # a neutral range given as a YAML list is still off
+    assert not RandomizationCfg(object_mass_scale=[1.0, 1.0]).is_on()

@@ -238,3 +238,11 @@ def test_in_training_evaluation_keeps_the_best_policy_and_its_curve(tmp_path):
     resumed.evaluator = lambda model: {"success_rate": 0.25, "duration_s": 50.0}
     assert resumed.evaluate_and_keep_best()["best"] is False
     assert read_checkpoint(tmp_path / "model_best.pt")["iteration"] == 6
+
+    # validated otherwise (the run now trains with domain randomisation): the old best is not compared with
+    randomized = {"success_rate": 0.25, "duration_s": 5.0, "validation": "training randomization"}
+    resumed.evaluator = lambda model: dict(randomized)
+    assert resumed.evaluate_and_keep_best()["best"] is True
+    assert read_checkpoint(tmp_path / "model_best.pt")["eval"]["validation"] == "training randomization"
+    resumed.evaluator = lambda model: {**randomized, "success_rate": 0.125}
+    assert resumed.evaluate_and_keep_best()["best"] is False  # rows validated alike are ranked as before

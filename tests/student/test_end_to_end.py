@@ -93,7 +93,8 @@ def test_stable_student_selects_on_validation_and_records_why(teacher_run, tmp_p
     assert [row["step"] for row in curve] == [2, 4, 6] and selection["evaluations"] == 3
     assert selection["checkpoint"] == "model_best.pt" and selection["iteration"] in (2, 4, 6)
     assert selection["validation"] == {"protocol": "randomized", "seed": 100_001, "episodes_per_clip": 2,
-                                       "every_iterations": 2}
+                                       "every_iterations": 2,
+                                       "randomization": "none (the protocol's starts only)"}
     assert selection["weights"].startswith("exponential moving average, decay 0.98")
     assert selection["actor_lr"] == {"half_life_iterations": 100, "floor": 0.1}
     assert 1 <= len(selection["neighbours"]) <= 2 and 0.0 <= selection["neighbour_success_spread"] <= 1.0

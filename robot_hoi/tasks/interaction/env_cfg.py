@@ -8,7 +8,7 @@ set to `null` is disabled.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from typing import ClassVar
 
 from robot_hoi.errors import UserError
@@ -141,6 +141,15 @@ class RandomizationCfg:
     gyro_noise: float = 0.0         # rad/s (base_ang_vel)
     tracker_pos_noise: float = 0.0  # m, mocap positions (object_pos and every ref_* position relative to the pelvis)
     tracker_rot_noise: float = 0.0  # rad, mocap orientations (object_rot, ref_root_rot, ref_object_rot)
+
+    def is_on(self) -> bool:
+        """Whether any range or noise is away from its neutral (off) value."""
+        neutral = RandomizationCfg()
+        return any(_values(getattr(self, f.name)) != _values(getattr(neutral, f.name)) for f in fields(self))
+
+
+def _values(value):
+    return tuple(value) if isinstance(value, (list, tuple)) else value
 
 
 @dataclass
