@@ -38,7 +38,7 @@ def _env(**fields) -> SimpleNamespace:
     """One env on a reference at the origin; `fields` override the simulated side (batch of 1 unless given)."""
     ref = SimpleNamespace(link_pos=REF_LINKS[None].clone(), root_pos=REF_LINKS[None, 0].clone(),
                           root_quat_wxyz=_identity(1), link_quat_wxyz=_identity(1, 6), joint_pos=torch.zeros(1, 5,
-                          dtype=F64), object_pos=torch.tensor([[0.6, 0.0, 0.15]], dtype=F64),
+                          dtype=F64), joint_state=torch.zeros(1, 5, dtype=F64), object_pos=torch.tensor([[0.6, 0.0, 0.15]], dtype=F64),
                           object_quat_wxyz=_identity(1), d_hat=torch.zeros(1, 6, 3, dtype=F64))
     env = SimpleNamespace(ref=ref, scene=SCENE, body_actuator_ids=[0, 1, 2], link_pos=ref.link_pos.clone(),
                           root_pos=ref.root_pos.clone(), root_quat=_identity(1), link_quat=_identity(1, 6),
@@ -104,6 +104,16 @@ def test_hand_position_cost():
 def test_joint_position_cost():
     env = _env(joint_pos=torch.tensor([[0.1, -0.2, 0.3, 5.0, 5.0]], dtype=F64))  # finger channels excluded
     assert R.joint_position_cost(env).item() == pytest.approx((0.01 + 0.04 + 0.09) / 3)
+
+
+def test_joint_position_cost_is_zero_on_the_reference_state_whatever_the_squeeze():
+    """The PD targets carry the grasp squeeze and load offsets; a robot exactly on the reference state measures
+    the state's joints and is not charged for them (issue 48's 'fix on the way')."""
+    env = _env()
+    env.ref.joint_pos = torch.tensor([[0.3, -0.2, 0.1, 0.0, 0.0]], dtype=F64)  # squeezed PD targets
+    env.ref.joint_state = torch.tensor([[0.1, 0.0, 0.1, 0.0, 0.0]], dtype=F64)
+    env.joint_pos = env.ref.joint_state.clone()
+    assert R.joint_position_cost(env).item() == 0.0
 
 
 # ---- squared errors and the feet weight of the InterMimic terms ---------------------------------------------------

@@ -52,7 +52,8 @@ class ReferenceFrame:
     hand_distance: Tensor
     root_pos: Tensor
     root_quat_wxyz: Tensor
-    joint_pos: Tensor
+    joint_pos: Tensor    # PD targets of a zero action: the state's joints plus the grasp squeeze and load offsets
+    joint_state: Tensor  # the reference state's actuated joints (what a robot on the reference measures)
     link_rotmat: Tensor
     object_rotmat: Tensor
     root_rotmat: Tensor
@@ -161,6 +162,7 @@ class InteractionEnv:
         self.ref_object_lin_vel, self.ref_object_ang_vel = cat("object_lin_vel"), cat("object_ang_vel")
         self.ref_robot_qpos, self.ref_robot_qvel = cat("robot_qpos"), cat("robot_qvel")
         self.ref_joint_pos = cat("joint_pos")
+        self.ref_joint_state = self.ref_robot_qpos[:, torch.as_tensor(self.layout.actuator_qpos, device=self.device)]
         # rotation matrices of the whole reference, computed once (the observation terms use matrices)
         self.ref_link_rotmat = quat_to_matrix(self.ref_link_quat)
         self.ref_object_rotmat = quat_to_matrix(self.ref_object_quat)
@@ -596,7 +598,7 @@ def reference_frame(ref, idx: Tensor) -> ReferenceFrame:
         object_pos=ref.ref_object_pos[idx], object_quat_wxyz=ref.ref_object_quat[idx],
         hand_contact=ref.ref_hand_contact[idx], hand_distance=ref.ref_hand_distance[idx],
         root_pos=ref.ref_robot_qpos[idx, 0:3], root_quat_wxyz=ref.ref_robot_qpos[idx, 3:7],
-        joint_pos=ref.ref_joint_pos[idx], link_rotmat=ref.ref_link_rotmat[idx],
+        joint_pos=ref.ref_joint_pos[idx], joint_state=ref.ref_joint_state[idx], link_rotmat=ref.ref_link_rotmat[idx],
         object_rotmat=ref.ref_object_rotmat[idx], root_rotmat=ref.ref_root_rotmat[idx],
     )
 

@@ -98,9 +98,10 @@ def hand_position_cost(env) -> Tensor:
 
 
 def joint_position_cost(env) -> Tensor:
-    """Mean squared error of the body joints to the reference's (the retarget's posture)."""
+    """Mean squared error of the body joints to the reference state's (the retarget's posture; not to its PD
+    targets, whose grasp squeeze and load offsets would charge a robot exactly on the reference)."""
     ids = env.body_actuator_ids
-    return (env.ref.joint_pos[:, ids] - env.joint_pos[:, ids]).square().mean(-1)
+    return (env.ref.joint_state[:, ids] - env.joint_pos[:, ids]).square().mean(-1)
 
 
 def link_acceleration_cost(env) -> Tensor:
