@@ -38,7 +38,8 @@ def _env(**fields) -> SimpleNamespace:
     """One env on a reference at the origin; `fields` override the simulated side (batch of 1 unless given)."""
     ref = SimpleNamespace(link_pos=REF_LINKS[None].clone(), root_pos=REF_LINKS[None, 0].clone(),
                           root_quat_wxyz=_identity(1), link_quat_wxyz=_identity(1, 6), joint_pos=torch.zeros(1, 5,
-                          dtype=F64), joint_state=torch.zeros(1, 5, dtype=F64), object_pos=torch.tensor([[0.6, 0.0, 0.15]], dtype=F64),
+                          dtype=F64), joint_state=torch.zeros(1, 5, dtype=F64),
+                          object_pos=torch.tensor([[0.6, 0.0, 0.15]], dtype=F64),
                           object_quat_wxyz=_identity(1), d_hat=torch.zeros(1, 6, 3, dtype=F64))
     env = SimpleNamespace(ref=ref, scene=SCENE, body_actuator_ids=[0, 1, 2], link_pos=ref.link_pos.clone(),
                           root_pos=ref.root_pos.clone(), root_quat=_identity(1), link_quat=_identity(1, 6),
