@@ -24,7 +24,11 @@ exit codes: 0 completed, 1 fault, 2 usage, 3 not started, 4 refused, 5 e-stop, 7
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--policy", required=True, help="ONNX policy file following the deploy contract")
-    p.add_argument("--motion", default=None, help="reference motion .motion.npz (default: the policy's sidecar)")
+    motion = p.add_mutually_exclusive_group()
+    motion.add_argument("--motion", default=None, help="reference motion .motion.npz (default: the policy's sidecar)")
+    motion.add_argument("--skill", default=None, metavar="CLIP",
+                        help="for a policy of several skills: the skill (a clip it learnt) to run, its sidecar "
+                             "checked against the policy (default: the policy's default skill)")
     p.add_argument("--embodiment", default="g1_inspire", help="embodiment name or YAML path (default g1_inspire)")
     p.add_argument("--dry-run", action="store_true",
                    help="simulated body + tracker; simulated hands unless real hand ports are given")
@@ -121,7 +125,7 @@ def options_from_args(args: argparse.Namespace):
         safety.watchdog_s = None
     safety.remote_estop = args.remote_estop
     return DeployOptions(
-        policy=args.policy, motion=args.motion, embodiment=args.embodiment, dry_run=args.dry_run,
+        policy=args.policy, motion=args.motion, skill=args.skill, embodiment=args.embodiment, dry_run=args.dry_run,
         hand_bus=args.hand_bus, hand_ports=args.hand_port, hand_ids=args.hand_id, can_channel=args.can_channel,
         can_interface=args.can_interface, hand_timeout=args.hand_timeout, hand_retries=args.hand_retries,
         hand_safe_state=args.hand_safe_state, hand_force_limit=args.hand_force_limit, hand_speed=args.hand_speed,

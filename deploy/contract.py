@@ -37,7 +37,9 @@ unquoted string is accepted too)
     warmup_blend        bool                   optional, default false. true ("reference" mode): during the warmup
                                                the target offset glides from default_pose (tick 0) to frame 0's
                                                joints, warmup_offset(); false: frame 0's joints from tick 0
-    data                {"clips": [...], "license": str}
+    data                {"clips": [...], "license": str}   the clips the policy learnt; a clip with
+                                               "motion": {"file", "sha256"} is a skill: that sidecar (next to the
+                                               .onnx) is its reference, and `reference` names the default skill's
     tracker             ["robot"[, "object"]]  optional: the poses the policy reads from the pose tracker (mocap);
                                                [] = none, the runtime opens no tracker. Derived from obs_spec
                                                (tracked_poses); a file whose value disagrees is refused
@@ -196,6 +198,7 @@ class PolicyContract:
     warmup_frames: int = 0
     warmup_blend: bool = False
     task: dict | None = None
+    skills: dict[str, ReferenceInfo] = field(default_factory=dict)  # clip name -> its sidecar (data.clips "motion")
 
     @property
     def num_actions(self) -> int:
@@ -264,6 +267,14 @@ class PolicyContract:
         if self.reference is None:
             return None
         return Path(self.source).parent / self.reference.file
+
+    def skill_reference(self, name: str) -> tuple[Path, ReferenceInfo]:
+        """The sidecar path and entry of skill `name` (a clip of data.clips with a motion)."""
+        if name not in self.skills:
+            known = ", ".join(self.skills) or "none (the policy has one reference)"
+            raise ContractError(f"{self.source}: no skill {name!r}; its skills: {known}")
+        info = self.skills[name]
+        return Path(self.source).parent / info.file, info
 
     def to_metadata(self) -> dict[str, str]:
         """The metadata_props this contract is written as (values JSON-encoded)."""
@@ -415,17 +426,17 @@ def _parse(metadata: dict[str, str], source: str) -> PolicyContract:
 
     reference = values["reference"]
     if reference is not None:
-        if not isinstance(reference, dict) or not isinstance(reference.get("file"), str) or not reference["file"]:
-            raise fail("reference", "must be null or {'file': str, 'sha256': str}")
-        if Path(reference["file"]).name != reference["file"]:
-            raise fail("reference", f"file must be a bare file name next to the policy, got {reference['file']!r}")
-        sha = reference.get("sha256")
-        if not isinstance(sha, str) or len(sha) != 64 or any(c not in "0123456789abcdef" for c in sha.lower()):
-            raise fail("reference", "sha256 must be 64 hex characters")
-        reference = ReferenceInfo(file=reference["file"], sha256=sha.lower())
+        reference = _reference_info(reference, lambda problem: fail("reference", problem))
     data = values["data"]
     if not isinstance(data, dict) or not isinstance(data.get("clips"), list) or not isinstance(data.get("license"), str):
         raise fail("data", "must be {'clips': [...], 'license': str}")
+    skills = {}
+    for i, clip in enumerate(data["clips"]):
+        if isinstance(clip, dict) and clip.get("motion") is not None:
+            if not isinstance(clip.get("name"), str) or not clip["name"]:
+                raise fail("data", f"clip {i} has a motion but no name")
+            skills[clip["name"]] = _reference_info(clip["motion"],
+                                                   lambda problem, i=i: fail("data", f"clip {i} motion {problem}"))
 
     offset_mode = _optional_json(metadata, "action_offset_mode", "fixed", fail)
     if offset_mode not in ACTION_OFFSET_MODES:
@@ -463,8 +474,21 @@ def _parse(metadata: dict[str, str], source: str) -> PolicyContract:
         link_names=tuple(link_names),
         reference=reference,
         data=data,
+        skills=skills,
         **arrays,
     )
+
+
+def _reference_info(value, fail) -> ReferenceInfo:
+    """A sidecar entry {"file": bare name next to the policy, "sha256": 64 hex}; `fail(problem)` makes the error."""
+    if not isinstance(value, dict) or not isinstance(value.get("file"), str) or not value["file"]:
+        raise fail("must be null or {'file': str, 'sha256': str}")
+    if Path(value["file"]).name != value["file"]:
+        raise fail(f"file must be a bare file name next to the policy, got {value['file']!r}")
+    sha = value.get("sha256")
+    if not isinstance(sha, str) or len(sha) != 64 or any(c not in "0123456789abcdef" for c in sha.lower()):
+        raise fail("sha256 must be 64 hex characters")
+    return ReferenceInfo(file=value["file"], sha256=sha.lower())
 
 
 def _optional_json(metadata: dict[str, str], key: str, default, fail):

@@ -57,6 +57,7 @@ HAND_TRANSPORTS = ("serial", "modbus", "can")
 class DeployOptions:
     policy: str
     motion: str | None = None
+    skill: str | None = None  # a skill of a many-skill policy: its sidecar (contract.skills)
     embodiment: str = "g1_inspire"
     dry_run: bool = False
     hand_bus: str = "serial"
@@ -201,6 +202,11 @@ class Session(contextlib.ExitStack):
         o = self.options
         if o.motion:
             return load_motion(o.motion)
+        if o.skill:
+            path, info = contract.skill_reference(o.skill)
+            if not path.is_file():
+                raise DeployError(f"{contract.source}: the sidecar {path} of skill {o.skill!r} is missing")
+            return load_motion(path, expected_sha256=info.sha256)
         if contract.reference is not None:
             path = contract.reference_path()
             if not path.is_file():

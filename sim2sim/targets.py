@@ -1,7 +1,8 @@
 """What the policy is evaluated on: reference motions in the runtime's sidecar format, with their objects.
 
 Default: the policy's own motion sidecar (or --motion), and the object of the clip its metadata names
-(`data.clips[0].source`, e.g. `embedded:lift_carry`). With --clips, each clip is retargeted to the robot the way
+(`data.clips[0].source`, e.g. `embedded:lift_carry`); a policy of several skills (data.clips entries with a
+"motion"): every skill, each on its clip's object. With --clips, each clip is retargeted to the robot the way
 training does it (robot_hoi.tasks.interaction.factory), turned into a sidecar motion (robot_hoi.export), and
 evaluated with its own object. Each target carries the compiled validation scene (sim2sim.scene) as MJB bytes.
 
@@ -77,10 +78,21 @@ def _target(clip, source: str, motion: ReferenceMotion, embodiment: str, self_co
 
 def policy_targets(contract, motion_path: str | None, embodiment: str, self_collision: bool,
                    clip_options: dict | None = None, env_cfg=None) -> list[EvalTarget]:
-    """The policy's own reference (its sidecar, or --motion) on the object of the clip it was exported with.
-    `env_cfg`: the policy's task config when the caller has it (else read with task_config)."""
-    from robot_hoi.tasks.interaction.factory import load_source
-
+    """The policy's own reference (its sidecar, or --motion) on the object of the clip it was exported with; for a
+    policy of several skills, every skill on its own clip's object. `env_cfg`: the policy's task config when the
+    caller has it (else read with task_config)."""
+    env_cfg = env_cfg or task_config(contract)
+    if not motion_path and contract.skills:  # a policy of several skills: each on its own clip's object
+        targets = []
+        for clip in contract.data["clips"]:
+            if clip.get("name") in contract.skills:
+                path, info = contract.skill_reference(clip["name"])
+                if not path.is_file():
+                    raise UserError(f"{contract.source}: the sidecar {path} of skill {clip['name']!r} is missing")
+                motion = load_motion(path, expected_sha256=info.sha256)
+                targets.append(_policy_target(contract, motion, clip, embodiment, self_collision, clip_options,
+                                              env_cfg))
+        return targets
     if motion_path:
         motion = load_motion(motion_path)
     elif contract.reference is not None:
@@ -90,18 +102,29 @@ def policy_targets(contract, motion_path: str | None, embodiment: str, self_coll
         motion = load_motion(path, expected_sha256=contract.reference.sha256)
     else:
         raise UserError(f"{contract.source}: the policy ships no reference motion; pass --motion or --clips")
+    clips = contract.data.get("clips") or []
+    # --motion of one of the policy's skills: that clip's object; else the first clip's
+    named = [c for c in clips if isinstance(c, dict) and motion_path and (c.get("motion") or {}).get("file")
+             == Path(motion_path).name]
+    return [_policy_target(contract, motion, (named or clips or [{}])[0], embodiment, self_collision, clip_options,
+                           env_cfg)]
+
+
+def _policy_target(contract, motion: ReferenceMotion, clip: dict, embodiment: str, self_collision: bool,
+                   clip_options: dict | None, env_cfg) -> EvalTarget:
+    """`motion` on the object of `clip` (an entry of the policy's data.clips)."""
+    from robot_hoi.tasks.interaction.factory import load_source
+
     try:
         motion.check_against(contract)
     except DeployError as exc:
         raise UserError(str(exc)) from None
-    clips = contract.data.get("clips") or []
-    source = clips[0].get("source") if clips else None
+    source = clip.get("source")
     if not source:
         raise UserError(f"{contract.source}: metadata names no clip to take the object from; pass --clips")
     if not source.startswith("embedded:") and not Path(source).is_file():
         raise UserError(f"{contract.source}: its clip {source} is not on this machine; pass --clips CLIP")
-    return [_target(load_source(source, clip_options), source, motion, embodiment, self_collision,
-                    env_cfg or task_config(contract))]
+    return _target(load_source(source, clip_options), source, motion, embodiment, self_collision, env_cfg)
 
 
 def clip_targets(contract, sources: list[str], embodiment: str, self_collision: bool,

@@ -26,7 +26,9 @@ def register(subparsers) -> None:
     o.add_argument("--embodiment", default="g1_inspire",
                    help="with --untrained: robot name under configs/embodiments/ or a YAML path")
     o.add_argument("--seed", type=int, default=0, help="with --untrained")
-    o.add_argument("--clip", default=None, help="student: the clip whose reference goes in the motion sidecar")
+    o.add_argument("--clip", default=None,
+                   help="student: the default skill, whose reference is <name>.motion.npz (every clip it learnt "
+                        "gets a sidecar)")
     add_clip_options(o)
     o.set_defaults(func=run_onnx)
     c = sub.add_parser("check", help="check an ONNX policy file against the deploy contract (exit 1: not "

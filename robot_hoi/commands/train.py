@@ -94,7 +94,9 @@ def register(subparsers) -> None:
     c.add_argument("--storage", default="auto", choices=["auto", "shared", "local"],
                    help="auto: detect whether workers see the run folder; shared: they must; local: workers "
                         "train in their temp folder and send the results back")
-    p.add_argument("--teachers", default=None, help="student: the teacher run folder (the --out of `robot-hoi train`)")
+    p.add_argument("--teachers", nargs="+", default=None, metavar="RUN_DIR",
+                   help="student: the teacher run folder(s) (the --out of `robot-hoi train`); several folders, "
+                        "or clips of several objects, give a student of many skills")
     p.add_argument("--option", dest="options", action="append", default=[],
                    help="student: a configs/train/student_options preset, e.g. complexmimic, skillmimic_v2 (repeatable)")
     p.set_defaults(func=run)

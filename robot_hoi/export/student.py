@@ -1,8 +1,9 @@
 """Student checkpoint -> ONNX with the deploy contract (policy_kind "student") and the motion sidecar.
 
-The student reads only the deployable observation, so its file is what the robot runs. The sidecar is the
-reference the student tracked in training for the chosen clip (the teacher's rollout with reference
-distillation), verified like every export: onnx.checker, ORT vs torch on random and recorded observations. Its
+The student reads only the deployable observation, so its file is what the robot runs. Each clip it learnt is a
+skill with a sidecar: the reference the student tracked in training for that clip (the teacher's rollout with
+reference distillation); `--clip` names the default one (<name>.motion.npz), the others are
+<name>.<clip>.motion.npz, listed in the metadata's data.clips. The export is verified like every export: onnx.checker, ORT vs torch on random and recorded observations. Its
 joint angles, the PD targets of a zero action (action_offset "reference"), must lie inside the joint limits.
 """
 
@@ -10,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import re
 from pathlib import Path
 
 import numpy as np
@@ -41,44 +43,50 @@ def run_student_export(args: argparse.Namespace, ckpt: Path) -> int:
     env_cfg = saved_env_cfg(task["env"], f"{folder}/task.json")
     env_cfg.num_envs = 16
     env_cfg.psi.enabled = False
-    env, clips, sources = build_task_env(task, folder, env_cfg)
+    env, clips, sources, references, index = build_task_env(task, folder, env_cfg, clip=getattr(args, "clip", None))
     spec = student_observation_spec(env)
     if env.obs_dims["student"] != model.num_actor_obs or spec != data["student"].get("obs_spec", spec):
         raise UserError(f"{ckpt}: the student expects {model.num_actor_obs} observations, its task now gives "
                         f"{env.obs_dims['student']}; the observation code changed since training")
-    names = [c.name for c in clips]
-    index = 0
-    if getattr(args, "clip", None):
-        if args.clip not in names:
-            raise UserError(f"--clip {args.clip!r}: the student trained on {names}")
-        index = names.index(args.clip)
     recorded = record_observations(env, lambda o: model.act_inference(o["student"]), "student", args.recorded)
 
     out = Path(args.output) if args.output else EXPORT_DIR / f"{folder.parent.name}-student.onnx"
-    motion_file = out.with_name(out.stem + ".motion.npz")
     embodiment = load_embodiment(task["embodiment"])
     mj_model = build_model(embodiment)
-    motion = deploy_motion(env.references[index], source=str(motion_file))
     lower, upper, _ = actuator_limits(mj_model, embodiment.actuator_names)
-    outside = reference_outside_limits(motion.joint_pos, lower, upper)
-    if outside:
-        # references distilled before they were clipped at the source (reference_distill.FORMAT 1)
-        motion = dataclasses.replace(motion, joint_pos=np.clip(motion.joint_pos, lower + LIMIT_MARGIN,
-                                                               upper - LIMIT_MARGIN))
-        print(f"note: reference joints clipped into the joint limits ({outside})")
-    motion.save(motion_file)
+    # one sidecar per clip (a skill): the chosen clip's is the default <name>.motion.npz
+    identities = []
+    for i, clip in enumerate(clips):
+        stem = out.stem if i == index else f"{out.stem}.{re.sub(r'[^A-Za-z0-9_-]+', '_', clip.name)}"
+        motion_file = out.with_name(stem + ".motion.npz")
+        write_sidecar(references[i], motion_file, lower, upper)
+        identities.append({**clip_identity(clip, sources[i]),
+                           "motion": {"file": motion_file.name, "sha256": file_sha256(motion_file)}})
+        print(f"wrote {motion_file} (reference of {clip.name}, {references[i].num_frames} frames"
+              f"{', the default skill' if i == index else ''})")
     metadata = policy_metadata(
         embodiment, mj_model, policy_kind="student", obs_spec=spec,
         keyframes=env_cfg.student_keyframes, action_clip=env_cfg.action_clip,
-        clips=[clip_identity(clips[index], sources[index])],
-        reference={"file": motion_file.name, "sha256": file_sha256(motion_file)},
+        clips=[identities[index]] + identities[:index] + identities[index + 1:],
+        reference=identities[index]["motion"],
         **offset_settings(env_cfg), env_cfg=env_cfg,
     )
     report = export_policy(model.exported_policy(), model.num_actor_obs, metadata, out, recorded_obs=recorded)
     for line in report.lines():
         print(line)
-    print(f"wrote {motion_file} (reference of {names[index]}, {env.references[index].num_frames} frames)")
     return 0
+
+
+def write_sidecar(reference, path: Path, lower, upper) -> None:
+    """The deploy sidecar of a reference; joints clipped into the limits where an old distilled reference left
+    them (reference_distill.FORMAT 1)."""
+    motion = deploy_motion(reference, source=str(path))
+    outside = reference_outside_limits(motion.joint_pos, lower, upper)
+    if outside:
+        motion = dataclasses.replace(motion, joint_pos=np.clip(motion.joint_pos, lower + LIMIT_MARGIN,
+                                                               upper - LIMIT_MARGIN))
+        print(f"note: {path.name}: reference joints clipped into the joint limits ({outside})")
+    motion.save(path)
 
 
 def reference_outside_limits(joint_pos, lower, upper) -> str:

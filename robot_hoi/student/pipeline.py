@@ -19,6 +19,8 @@ the deployable observation switched on; `--set env.*` changes it, other `--set` 
 from __future__ import annotations
 
 import argparse
+import dataclasses
+import itertools
 import json
 import os
 import re
@@ -48,6 +50,7 @@ from robot_hoi.student.config import DEFAULT_PRESET, PRESETS, StudentTrainConfig
 from robot_hoi.student.distributed import Rank, SharedBudget, state_checksum, sum_over_ranks
 from robot_hoi.student.evaluation import evaluate_groups, format_table
 from robot_hoi.student.experts import prepare_experts
+from robot_hoi.student.object_groups import GroupedTeacher, ObjectGroupsEnv, split_envs
 from robot_hoi.student.reference_distill import FORMAT as REFERENCE_FORMAT
 from robot_hoi.student.reference_distill import load_reference, rollout_reference, save_reference
 from robot_hoi.student.reference_view import ReferenceTimeline, ReferenceView
@@ -55,7 +58,6 @@ from robot_hoi.student.runner import DistillationRunner
 from robot_hoi.student.student_env import StudentEnv, fresh_providers
 from robot_hoi.student.task import (
     STUDENT_GROUP,
-    check_single_object,
     evaluation_cfg,
     make_scene,
     mocap_reference,
@@ -83,13 +85,28 @@ class Setup:
     sources: list[str]
     clips: list
     mocap: list  # MoCap ReferenceMotion per clip
-    scene: object
+    scenes: list  # the scene of each clip's object (clips of one object share it)
     out: Path
     device: str = "cpu"
     members: list[TeacherMember] = field(default_factory=list)
     clip_teacher: list[int] = field(default_factory=list)
     clip_group: list[int] = field(default_factory=list)  # ComplexMimic regime per clip (0 imitate, 1 interact)
     task_extra: dict = field(default_factory=dict)
+
+    @property
+    def scene(self):
+        """The one scene of a single-object run (what the single-object options build on)."""
+        if len({id(s) for s in self.scenes}) > 1:
+            raise UserError(f"this needs the clips of one object; the teachers' clips use "
+                            f"{sorted({c.object_name for c in self.clips})}")
+        return self.scenes[0]
+
+    def object_groups(self, clips: list[int]) -> list[list[int]]:
+        """`clips` grouped by object, groups in order of first appearance."""
+        groups: dict[int, list[int]] = {}
+        for i in clips:
+            groups.setdefault(id(self.scenes[i]), []).append(i)
+        return list(groups.values())
 
 
 def prepare(args: argparse.Namespace) -> Setup:
@@ -99,7 +116,7 @@ def prepare(args: argparse.Namespace) -> Setup:
         raise UserError("robot-hoi train student: --data does not apply; the student learns its teachers' clips")
     config_path = args.config or PRESETS[args.preset or DEFAULT_PRESET]  # None: no --preset (nor recipe)
     cfg, env_overrides = load_student_config(config_path, getattr(args, "options", []), args.overrides)
-    runs = load_teacher_runs(args.teachers)
+    runs = load_teacher_runs(*([args.teachers] if isinstance(args.teachers, str | Path) else args.teachers))
     teacher_env_cfg = saved_env_cfg(runs[0].env, f"{runs[0].checkpoint.parent}/task.json")
     teacher_env_cfg = apply_overrides(teacher_env_cfg, [o for o in env_overrides if o.startswith("num_envs=")
                                                         or o.startswith("nthread=")], "--set env.*")
@@ -123,14 +140,20 @@ def prepare(args: argparse.Namespace) -> Setup:
                 clip_teacher.append(index)
     options = clip_options(args, runs[0].task.get("clip_options"))
     clips = [factory.load_source(s, options) for s in sources]
-    check_single_object(clips)
+    scenes: dict[str, object] = {}
+    for clip in clips:
+        if clip.object_name not in scenes:
+            scenes[clip.object_name] = make_scene(clip, embodiment, env_cfg)
     source_run = {s: runs[clip_teacher[i]] for i, s in enumerate(sources)}
     mocap = [mocap_reference(c, embodiment, teacher_env_cfg, source_run[s].checkpoint.parent / "references")
              for c, s in zip(clips, sources, strict=True)]
     out = Path(args.out) if args.out else Path("runs") / f"{time.strftime('%Y%m%d-%H%M%S')}-student"
     members = [TeacherMember(run.name, run.model, run.checkpoint, run.obs_groups, run.action_offset) for run in runs]
+    if len(scenes) > 1 and (cfg.complexmimic.enabled or cfg.skillmimic.enabled):
+        raise UserError(f"the ComplexMimic and SkillMimic-V2 options need the clips of one object; the teachers' "
+                        f"clips use {sorted(scenes)}: distil one student per object with them")
     return Setup(cfg, env_cfg, teacher_env_cfg, embodiment, runs, sources, clips, mocap,
-                 make_scene(clips[0], embodiment, env_cfg), out, args.device, members, clip_teacher,
+                 [scenes[c.object_name] for c in clips], out, args.device, members, clip_teacher,
                  [0] * len(sources), {"clip_options": options})
 
 
@@ -138,7 +161,7 @@ def rollout_env(setup: Setup, index: int, cfg: InteractionEnvCfg | None = None):
     """One env (num_envs 1, eval settings) on clip `index`'s MoCap reference, long enough for the whole clip."""
     cfg = evaluation_cfg(cfg or setup.teacher_env_cfg, num_envs=1)
     cfg.max_episode_frames = max(cfg.max_episode_frames, setup.mocap[index].num_frames + cfg.warmup_frames + 2)
-    return InteractionEnv(cfg, setup.scene, [setup.mocap[index]])
+    return InteractionEnv(cfg, setup.scenes[index], [setup.mocap[index]])
 
 
 def distil_references(setup: Setup) -> list[tuple[object, str | None]]:
@@ -192,18 +215,29 @@ def student_environment(setup: Setup, write: bool = True) -> StudentParts:
         distilled = distil_references(setup)
     else:
         distilled = [(m, None) for m in setup.mocap]
-    keep = [i for i, (ref, _) in enumerate(distilled) if ref is not None]
-    if not keep:
+    kept = [i for i, (ref, _) in enumerate(distilled) if ref is not None]
+    if not kept:
         raise UserError("no teacher rollout tracked its clip long enough to serve as a reference "
                         f"(distill.reference_min_frames = {cfg.distill.reference_min_frames}); train the teachers "
                         "longer, or use --set distill.reference=mocap")
-    env = InteractionEnv(setup.env_cfg, setup.scene, [distilled[i][0] for i in keep])
-    timeline = ReferenceTimeline([setup.mocap[i] for i in keep], env)
-    view = ReferenceView(env, timeline, setup.teacher_env_cfg.keyframes, setup.teacher_env_cfg.warmup_frames,
-                         setup.teacher_env_cfg.teacher_obs)
-    for member in setup.members:
-        member.view = view
-    composite = CompositeTeacher(setup.members, [setup.clip_teacher[i] for i in keep])
+    groups = setup.object_groups(kept)
+    keep = [i for group in groups for i in group]  # the env numbers clips group by group
+    for a, b in itertools.combinations(groups, 2):
+        shared = {setup.clip_teacher[i] for i in a} & {setup.clip_teacher[i] for i in b}
+        if shared:
+            raise UserError(f"teacher {setup.members[min(shared)].name} has clips of two objects; train one teacher "
+                            "per object (robot-hoi train --group object)")
+    if len(groups) == 1:
+        env, composite = object_group(setup, groups[0], setup.env_cfg, distilled)
+    else:
+        counts = split_envs(setup.env_cfg.num_envs, [len(g) for g in groups])
+        cfgs = [dataclasses.replace(setup.env_cfg, num_envs=n, seed=setup.env_cfg.seed + k)
+                for k, n in enumerate(counts)]
+        parts = [object_group(setup, g, c, distilled) for g, c in zip(groups, cfgs, strict=True)]
+        env, composite = ObjectGroupsEnv([p[0] for p in parts]), GroupedTeacher([p[1] for p in parts])
+        print(f"[student] {len(groups)} objects, one env each: " + ", ".join(
+            f"{setup.clips[g[0]].object_name} ({len(g)} clip(s), {n} envs)" for g, n in zip(groups, counts,
+                                                                                        strict=True)))
 
     providers, spec_extra = {}, []
     options = []
@@ -212,7 +246,7 @@ def student_environment(setup: Setup, write: bool = True) -> StudentParts:
         providers.update(options[-1].providers())
         spec_extra += options[-1].spec_extra()
     student_env = StudentEnv(env, providers)
-    spec = student_observation_spec(env) + spec_extra
+    spec = student_observation_spec(env.envs[0] if isinstance(env, ObjectGroupsEnv) else env) + spec_extra
     layout = token_layout(spec, setup.env_cfg.student_keyframes)
     cfg.runner.actor_obs_groups = ["student", *providers]
     if write:
@@ -225,6 +259,20 @@ def student_environment(setup: Setup, write: bool = True) -> StudentParts:
                            references=[distilled[i][1] for i in keep], env_cfg=setup.env_cfg,
                            embodiment_name=setup.embodiment.name, extra=task_extra)
     return StudentParts(student_env, composite, layout, spec, keep, options)
+
+
+def object_group(setup: Setup, clips: list[int], env_cfg: InteractionEnvCfg, distilled):
+    """The env of one object's `clips` (on their distilled references) and the composite of their teachers, each
+    teacher reading its observation against that env (its own ReferenceView)."""
+    env = InteractionEnv(env_cfg, setup.scenes[clips[0]], [distilled[i][0] for i in clips])
+    timeline = ReferenceTimeline([setup.mocap[i] for i in clips], env)
+    view = ReferenceView(env, timeline, setup.teacher_env_cfg.keyframes, setup.teacher_env_cfg.warmup_frames,
+                         setup.teacher_env_cfg.teacher_obs)
+    teachers = sorted({setup.clip_teacher[i] for i in clips})
+    for t in teachers:
+        setup.members[t].view = view
+    return env, CompositeTeacher([setup.members[t] for t in teachers],
+                                 [teachers.index(setup.clip_teacher[i]) for i in clips])
 
 
 def build_student(setup: Setup, args: argparse.Namespace, rank: Rank | None = None):
@@ -328,10 +376,11 @@ def evaluate_run(setup: Setup, runner, keep: list[int]) -> dict:
     for k, i in enumerate(keep):
         clip = setup.clips[i]
         member = setup.members[setup.clip_teacher[i]]
-        teacher_env = InteractionEnv(evaluation_cfg(setup.teacher_env_cfg, episodes), setup.scene, [setup.mocap[i]])
+        teacher_env = InteractionEnv(evaluation_cfg(setup.teacher_env_cfg, episodes), setup.scenes[i],
+                                     [setup.mocap[i]])
         rows.setdefault(f"teacher {member.name} (MoCap)", {})[clip.name] = member.evaluate(teacher_env)
         for label, reference in (("student (its reference)", env_refs[k]), ("student (MoCap)", setup.mocap[i])):
-            env = InteractionEnv(evaluation_cfg(setup.env_cfg, episodes), setup.scene, [reference])
+            env = InteractionEnv(evaluation_cfg(setup.env_cfg, episodes), setup.scenes[i], [reference])
             wrapped = StudentEnv(env, fresh_providers(runner.env.providers, episodes))
             rows.setdefault(label, {})[clip.name] = evaluate_groups(wrapped, model, runner.cfg.runner.actor_obs_groups)
     for line in format_table(rows):
@@ -351,7 +400,7 @@ def validation_evaluator(setup: Setup, runner, keep: list[int]):
     episodes = setup.cfg.runner.eval_episodes
     envs = {}
     for k, i in enumerate(keep):
-        env = InteractionEnv(selection_env_cfg(setup.env_cfg, episodes, seed), setup.scene,
+        env = InteractionEnv(selection_env_cfg(setup.env_cfg, episodes, seed), setup.scenes[i],
                              [runner.env.env.references[k]])
         envs[setup.clips[i].name] = StudentEnv(env, fresh_providers(runner.env.providers, episodes))
     groups = runner.cfg.runner.actor_obs_groups

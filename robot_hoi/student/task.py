@@ -51,13 +51,6 @@ def make_scene(clip, embodiment, env_cfg: InteractionEnvCfg):
     return InteractionScene.for_task(embodiment, clip.object, env_cfg)
 
 
-def check_single_object(clips) -> None:
-    objects = sorted({c.object_name for c in clips})
-    if len(objects) != 1:
-        raise UserError(f"one student environment holds one object; the teachers' clips use {objects}: "
-                        "distil one student per object (pass --teachers folders of one object)")
-
-
 def write_student_task(folder: Path, *, sources: list[str], references: list[str | None],
                        env_cfg: InteractionEnvCfg, embodiment_name: str, extra: dict) -> None:
     """references[i]: path of clip i's distilled reference relative to `folder`, or None (MoCap retarget)."""
@@ -86,7 +79,6 @@ def task_references(task: dict, folder: Path, env_cfg: InteractionEnvCfg, refere
     embodiment = load_embodiment(task["embodiment"])
     sources = list(task["sources"])
     clips = [factory.load_source(s, task.get("clip_options")) for s in sources]
-    check_single_object(clips)
     references = []
     for clip, rel in zip(clips, task["references"], strict=True):
         if rel is not None and reference == "trained":
@@ -112,9 +104,16 @@ def retarget_cache(task: dict, folder: Path, clip) -> Path:
 
 
 def build_task_env(task: dict, folder: Path, env_cfg: InteractionEnvCfg | None = None,
-                   reference: str = "trained"):
-    """(InteractionEnv, clips, sources) of a student task on its `reference`s (see task_references)."""
+                   reference: str = "trained", clip: str | None = None):
+    """(InteractionEnv, clips, sources, references, index) of a student task on its `reference`s (see
+    task_references); the env holds the clips of the object of clip `clip` (a name; default the first): a scene
+    holds one object. `index`: that clip's among `clips`."""
     cfg = env_cfg or saved_env_cfg(task["env"], f"{folder / TASK_FILE}")
     embodiment, clips, sources, references = task_references(task, folder, cfg, reference)
-    env = InteractionEnv(cfg, make_scene(clips[0], embodiment, cfg), references)
-    return env, clips, sources
+    names = [c.name for c in clips]
+    if clip is not None and clip not in names:
+        raise UserError(f"--clip {clip!r}: the student trained on {names}")
+    index = names.index(clip) if clip is not None else 0
+    same_object = [r for c, r in zip(clips, references, strict=True) if c.object_name == clips[index].object_name]
+    env = InteractionEnv(cfg, make_scene(clips[index], embodiment, cfg), same_object)
+    return env, clips, sources, references, index

@@ -69,9 +69,11 @@ def teacher_folders(run_dir: Path) -> list[Path]:
     return folders
 
 
-def load_teacher_runs(run_dir: str | Path) -> list[TeacherRun]:
+def load_teacher_runs(*run_dirs: str | Path) -> list[TeacherRun]:
+    """The teachers of one or more `robot-hoi train` folders (a student of many skills takes several)."""
     runs = []
-    for folder in teacher_folders(Path(run_dir)):
+    folders = [f for run_dir in run_dirs for f in teacher_folders(Path(run_dir))]
+    for folder in dict.fromkeys(folders):
         ckpt = policy_checkpoint(folder)
         if ckpt is None:
             raise UserError(f"{folder}: no model_*.pt checkpoint; train the teacher first")

@@ -278,3 +278,30 @@ def test_task_record_round_trips(contract, tmp_path):
     meta = dict(contract.to_metadata(), task=json.dumps(task))
     back = PolicyContract.from_onnx(write_policy(tmp_path / "p.onnx", meta, contract.obs_dim, contract.num_actions))
     assert back.task == task and back.to_metadata() == meta
+
+
+def test_skills_are_the_clips_with_a_motion(contract, tmp_path):
+    sha = "ab" * 32
+    data = {"clips": [{"name": "walk", "source": "embedded:walk:0", "motion": {"file": "p.motion.npz", "sha256": sha}},
+                      {"name": "lift", "source": "embedded:lift_place",
+                       "motion": {"file": "p.lift.motion.npz", "sha256": sha}},
+                      {"name": "no_sidecar", "source": "x.pt"}], "license": ""}
+    meta = dict(contract.to_metadata(), data=json.dumps(data))
+    back = PolicyContract.from_onnx(write_policy(tmp_path / "p.onnx", meta, contract.obs_dim, contract.num_actions))
+    assert list(back.skills) == ["walk", "lift"]
+    path, info = back.skill_reference("lift")
+    assert path == tmp_path / "p.lift.motion.npz" and info.sha256 == sha
+    with pytest.raises(ContractError, match="no skill 'squat'; its skills: walk, lift"):
+        back.skill_reference("squat")
+    assert PolicyContract.from_onnx(write_policy(tmp_path / "q.onnx", contract.to_metadata(), contract.obs_dim,
+                                                 contract.num_actions)).skills == {}
+
+
+@pytest.mark.parametrize("motion,expected", [({"file": "../p.motion.npz", "sha256": "ab" * 32}, "bare file name"),
+                                             ({"file": "p.motion.npz", "sha256": "ab"}, "sha256")])
+def test_a_malformed_skill_motion_is_refused(contract, tmp_path, motion, expected):
+    data = {"clips": [{"name": "walk", "motion": motion}], "license": ""}
+    meta = dict(contract.to_metadata(), data=json.dumps(data))
+    path = write_policy(tmp_path / "bad.onnx", meta, contract.obs_dim, contract.num_actions)
+    with pytest.raises(ContractError, match=rf"metadata 'data' clip 0 motion .*{expected}"):
+        PolicyContract.from_onnx(path)

@@ -98,7 +98,8 @@ def teacher_run(tmp_path_factory):
 def student_args(teachers, out, *extra, budget="2it"):
     """`robot-hoi train student` with a small Transformer; an untrained teacher falls within ~40 frames, so the
     distilled reference may be short."""
-    return ["train", "student", "--teachers", str(teachers), "--budget", budget, "--out", str(out), *QUIET,
+    teachers = [str(t) for t in (teachers if isinstance(teachers, list) else [teachers])]
+    return ["train", "student", "--teachers", *teachers, "--budget", budget, "--out", str(out), *QUIET,
             "--set", "student.width=32", "--set", "student.heads=2", "--set", "student.feedforward=64",
             "--set", "model.critic_hidden_dims=[32]", "--set", "distill.reference_min_frames=5",
             "--set", "distill.reference_failure_margin=2", "--set", "eval_episodes=1", *extra]

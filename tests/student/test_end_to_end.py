@@ -137,3 +137,47 @@ def test_two_teachers_one_student(tmp_path, capsys):
     task_file.write_text(json.dumps(changed))
     assert main(student_args(mixed, tmp_path / "refused")) == 2
     assert "different task settings (keyframes)" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_a_student_of_two_objects_exports_one_sidecar_per_skill(teacher_run, tmp_path, capsys):
+    """Teachers of the tall box (lift_place) and of the 5 kg box (a walk past it): one student, one env per object;
+    its export lists both clips as skills with their sidecars; a dry run picks a skill by name and sim2sim's
+    default targets are every skill on its own object."""
+    from sim2sim.targets import policy_targets
+
+    from .conftest import QUIET
+    walk = tmp_path / "walk_teacher"
+    assert main(["train", "--data", "embedded:walk:0", "--budget", "2it", "--out", str(walk), *QUIET,
+                 "--set", "model.actor_hidden_dims=[32]", "--set", "model.critic_hidden_dims=[32]"]) == 0
+    out = tmp_path / "student"
+    assert main(student_args([teacher_run, walk], out, "--set", "eval_episodes=0")) == 0
+    printed = capsys.readouterr().out
+    assert "2 objects, one env each: tall_box (1 clip(s), 2 envs), box (1 clip(s), 2 envs)" in printed
+    task = json.loads((out / "student" / "task.json").read_text())
+    assert task["sources"] == ["embedded:lift_place", "embedded:walk:0"]
+
+    onnx_file = tmp_path / "multi.onnx"
+    assert main(["export", "onnx", str(out / "student" / "model_2.pt"), "-o", str(onnx_file),
+                 "--clip", "synth_walk_seed0"]) == 0
+    contract = PolicyContract.from_onnx(onnx_file)
+    assert list(contract.skills) == ["synth_walk_seed0", "synth_lift_place_seed0"]
+    assert contract.reference.file == "multi.motion.npz"  # the default skill's
+    lift_path, lift_info = contract.skill_reference("synth_lift_place_seed0")
+    assert lift_path.name == "multi.synth_lift_place_seed0.motion.npz"
+    lift = load_motion(lift_path, expected_sha256=lift_info.sha256)
+    assert not np.allclose(lift.object_pos[0], load_motion(tmp_path / "multi.motion.npz").object_pos[0])
+
+    log_dir = tmp_path / "deploy"
+    assert main(["deploy", "--dry-run", "--policy", str(onnx_file), "--skill", "synth_lift_place_seed0",
+                 "--duration", "4", "--auto-start", "--log-dir", str(log_dir)]) == 0
+    assert json.loads((log_dir / "summary.json").read_text())["phase_time_s"].get("POLICY", 0.0) > 0.0
+    assert main(["deploy", "--dry-run", "--policy", str(onnx_file), "--skill", "squat", "--duration", "4",
+                 "--auto-start"]) != 0
+    assert "no skill 'squat'" in capsys.readouterr().err
+
+    targets = policy_targets(contract, None, "g1_inspire", True)
+    assert [(t.name, t.object_name) for t in targets] == [("synth_walk_seed0", "box"),
+                                                          ("synth_lift_place_seed0", "tall_box")]
+    one = policy_targets(contract, str(lift_path), "g1_inspire", True)
+    assert [(t.name, t.object_name) for t in one] == [("synth_lift_place_seed0", "tall_box")]
