@@ -37,7 +37,7 @@ def format_table(curve: Curve) -> str:
                      f"{r['samples'] / 1e6:7.2f}M {r['success_rate']:8.2f} "
                      f"{r.get('interaction_success_rate', float('nan')):9.2f} {r['duration_s']:11.2f} "
                      f"{r.get('E_h_cm', float('nan')):7.1f} {r.get('E_o_max_cm', float('nan')):11.1f}"
-                     f"{'  *' if r.get('best') else ''}")
+                     f"{'  *' if r.get('best') else ''}{'  (under ' + r['validation'] + ')' if r.get('validation') else ''}")
     return "\n".join(lines)
 
 
@@ -53,7 +53,9 @@ def format_summary(label: str, s: dict) -> str:
     return (f"{label}: first success 1.00 {'at ' + at(first) if first else 'never'}; best {best['success_rate']:.2f} "
             f"/ {best['duration_s']:.2f} s at {at(best)}; last {last['success_rate']:.2f} / {last['duration_s']:.2f} s "
             f"at {at(last)}; last {s['late_evaluations']}: success {s['late_mean_success']:.2f}, duration "
-            f"{s['late_mean_duration_s']:.2f} s")
+            f"{s['late_mean_duration_s']:.2f} s"
+            + (f" (rows validated under {s['validation']}; {s['evaluations_validated_otherwise']} validated otherwise "
+               "left out)" if s["evaluations_validated_otherwise"] else ""))
 
 
 def plot(curves: list[Curve], path: Path, x: str) -> None:

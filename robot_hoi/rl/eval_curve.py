@@ -77,10 +77,15 @@ def with_wall_time(rows: list[dict]) -> list[dict]:
 
 def summarize(rows: list[dict], tail: int = 3) -> dict:
     """First evaluation at success 1.0, the best (the runner's rank: eval_rank), the last, and the mean
-    duration and success of the last `tail` evaluations."""
+    duration and success of the last `tail` evaluations, over the rows validated like the last one (a run resumed
+    with domain randomisation switched on validates under it from then on: its rows are not compared with the
+    nominal ones before, as the runner does for model_best.pt)."""
     rows = with_wall_time(rows)
     if not rows:
         return {"evaluations": 0}
+    validation = rows[-1].get("validation")
+    other = sum(r.get("validation") != validation for r in rows)
+    rows = [r for r in rows if r.get("validation") == validation]
     first = next((r for r in rows if r["success_rate"] >= 1.0), None)
     best = max(rows, key=eval_rank)  # the first of equals, as the runner keeps
     late = rows[-max(tail, 1):]
@@ -94,4 +99,6 @@ def summarize(rows: list[dict], tail: int = 3) -> dict:
         "late_mean_duration_s": sum(r["duration_s"] for r in late) / len(late),
         "late_mean_success": sum(r["success_rate"] for r in late) / len(late),
         "late_evaluations": len(late),
+        "validation": validation or "protocol starts",
+        "evaluations_validated_otherwise": other,
     }

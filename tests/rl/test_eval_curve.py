@@ -34,6 +34,17 @@ def test_summary_first_success_best_and_late_mean(tmp_path):
     assert [r["wall_time_s"] for r in with_wall_time(rows)] == [62.0, 124.0, 186.0, 248.0, 310.0]
 
 
+def test_a_run_resumed_under_randomization_is_summarised_on_its_randomized_rows(tmp_path):
+    nominal = [_row(25, 1.0, 6.6, 60), _row(50, 1.0, 6.6, 120)]
+    randomized = [{**_row(75, 0.2, 4.0, 180), "validation": "training randomization"},
+                  {**_row(100, 0.4, 4.5, 240), "validation": "training randomization"}]
+    s = summarize(nominal + randomized, tail=3)
+    assert s["best"]["step"] == 100 and s["first_full_success"] is None
+    assert s["late_mean_success"] == pytest.approx(0.3) and s["late_evaluations"] == 2
+    assert s["validation"] == "training randomization" and s["evaluations_validated_otherwise"] == 2
+    assert summarize(nominal)["evaluations_validated_otherwise"] == 0
+
+
 def test_runs_are_found_recursively_and_labelled_by_folder(tmp_path):
     _write(tmp_path / "a" / "out" / "box", [_row(25, 0.0, 2.0, 60)])
     _write(tmp_path / "b" / "out" / "box", [_row(25, 1.0, 6.6, 60), _row(50, 1.0, 6.6, 120)])
