@@ -130,3 +130,20 @@ def load_motion(path: str | os.PathLike, expected_sha256: str | None = None) -> 
             raise DeployError(f"{path}: {key} is not a unit quaternion in frame {int(np.argmax(np.abs(norms - 1)))}")
         arrays[key] = arrays[key] / norms[:, None]
     return ReferenceMotion(fps=float(raw["fps"]), source=str(path), **arrays)
+
+
+def load_sidecar(contract: PolicyContract, skill: str | None = None, hint: str = "") -> ReferenceMotion | None:
+    """The policy's sidecar next to its file: skill `skill`'s (contract.skills), else the default reference; checked
+    against the sha256 the policy records. None when the policy names none. A missing file is a DeployError naming
+    it, `hint` (what to pass instead) appended to the default reference's."""
+    if skill is not None:
+        path, info = contract.skill_reference(skill)
+        missing = f"the sidecar {path} of skill {skill!r} is missing"
+    elif contract.reference is not None:
+        path, info = contract.reference_path(), contract.reference
+        missing = f"reference sidecar {path} is missing{hint}"
+    else:
+        return None
+    if not path.is_file():
+        raise DeployError(f"{contract.source}: {missing}")
+    return load_motion(path, expected_sha256=info.sha256)

@@ -36,7 +36,7 @@ from deploy.hand_pair import Hands
 from deploy.hands import DEFAULT_BAUDRATE, DEFAULT_CAN_BITRATE, make_hand_bus
 from deploy.hands.simulated import start_simulated_hand
 from deploy.loop import Runtime
-from deploy.motion import load_motion
+from deploy.motion import load_motion, load_sidecar
 from deploy.observations import ObservationBuilder
 from deploy.operator import KeyboardOperator, OperatorInput
 from deploy.outcome import Outcome
@@ -202,17 +202,7 @@ class Session(contextlib.ExitStack):
         o = self.options
         if o.motion:
             return load_motion(o.motion)
-        if o.skill:
-            path, info = contract.skill_reference(o.skill)
-            if not path.is_file():
-                raise DeployError(f"{contract.source}: the sidecar {path} of skill {o.skill!r} is missing")
-            return load_motion(path, expected_sha256=info.sha256)
-        if contract.reference is not None:
-            path = contract.reference_path()
-            if not path.is_file():
-                raise DeployError(f"{contract.source}: reference sidecar {path} is missing (or pass --motion)")
-            return load_motion(path, expected_sha256=contract.reference.sha256)
-        return None
+        return load_sidecar(contract, o.skill, hint=" (or pass --motion)")
 
     def _rate(self, contract) -> float:
         o = self.options

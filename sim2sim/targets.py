@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from deploy.errors import DeployError
-from deploy.motion import ReferenceMotion, load_motion
+from deploy.motion import ReferenceMotion, load_motion, load_sidecar
 from robot_hoi.embodiment import load_embodiment
 from robot_hoi.errors import UserError
 from robot_hoi.paths import TASK_CONFIG
@@ -83,25 +83,15 @@ def policy_targets(contract, motion_path: str | None, embodiment: str, self_coll
     caller has it (else read with task_config)."""
     env_cfg = env_cfg or task_config(contract)
     if not motion_path and contract.skills:  # a policy of several skills: each on its own clip's object
-        targets = []
-        for clip in contract.data["clips"]:
-            if clip.get("name") in contract.skills:
-                path, info = contract.skill_reference(clip["name"])
-                if not path.is_file():
-                    raise UserError(f"{contract.source}: the sidecar {path} of skill {clip['name']!r} is missing")
-                motion = load_motion(path, expected_sha256=info.sha256)
-                targets.append(_policy_target(contract, motion, clip, embodiment, self_collision, clip_options,
-                                              env_cfg))
-        return targets
+        return [_policy_target(contract, load_sidecar(contract, clip["name"]), clip, embodiment, self_collision,
+                               clip_options, env_cfg)
+                for clip in contract.data["clips"] if clip.get("name") in contract.skills]
     if motion_path:
         motion = load_motion(motion_path)
-    elif contract.reference is not None:
-        path = contract.reference_path()
-        if not path.is_file():
-            raise UserError(f"{contract.source}: reference sidecar {path} is missing (pass --motion or --clips)")
-        motion = load_motion(path, expected_sha256=contract.reference.sha256)
     else:
-        raise UserError(f"{contract.source}: the policy ships no reference motion; pass --motion or --clips")
+        motion = load_sidecar(contract, hint=" (pass --motion or --clips)")
+        if motion is None:
+            raise UserError(f"{contract.source}: the policy ships no reference motion; pass --motion or --clips")
     clips = contract.data.get("clips") or []
     # --motion of one of the policy's skills: that clip's object; else the first clip's
     named = [c for c in clips if isinstance(c, dict) and motion_path and (c.get("motion") or {}).get("file")

@@ -37,7 +37,8 @@ def format_table(curve: Curve) -> str:
                      f"{r['samples'] / 1e6:7.2f}M {r['success_rate']:8.2f} "
                      f"{r.get('interaction_success_rate', float('nan')):9.2f} {r['duration_s']:11.2f} "
                      f"{r.get('E_h_cm', float('nan')):7.1f} {r.get('E_o_max_cm', float('nan')):11.1f}"
-                     f"{'  *' if r.get('best') else ''}{'  (under ' + r['validation'] + ')' if r.get('validation') else ''}")
+                     f"{'  *' if r.get('best') else ''}"
+                     f"{'  (under ' + r['validation'] + ')' if r.get('validation') else ''}")
     return "\n".join(lines)
 
 

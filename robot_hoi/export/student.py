@@ -3,8 +3,9 @@
 The student reads only the deployable observation, so its file is what the robot runs. Each clip it learnt is a
 skill with a sidecar: the reference the student tracked in training for that clip (the teacher's rollout with
 reference distillation); `--clip` names the default one (<name>.motion.npz), the others are
-<name>.<clip>.motion.npz, listed in the metadata's data.clips. The export is verified like every export: onnx.checker, ORT vs torch on random and recorded observations. Its
-joint angles, the PD targets of a zero action (action_offset "reference"), must lie inside the joint limits.
+<name>.<clip>.motion.npz, listed in the metadata's data.clips. The export is verified like every export:
+onnx.checker, ORT vs torch on random and recorded observations. The sidecars' joint angles, the PD targets of a
+zero action (action_offset "reference"), must lie inside the joint limits.
 """
 
 from __future__ import annotations

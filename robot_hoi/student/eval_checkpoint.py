@@ -30,8 +30,8 @@ from robot_hoi.student.skillmimic import ENCODER_FILE, load_history_encoder
 from robot_hoi.student.student_env import StudentEnv
 from robot_hoi.student.task import (
     evaluation_cfg,
-    make_scene,
     mocap_reference,
+    object_scenes,
     read_student_task,
     retarget_cache,
     task_folder,
@@ -87,10 +87,8 @@ def evaluate_student(checkpoint: str | Path, data: list[str] | None = None, epis
             if rel is not None:
                 cases.append(("distilled", clip, trained_ref))
     results: dict[str, dict[str, dict[str, float]]] = {}
-    scenes: dict[str, object] = {}
+    scenes = object_scenes([clip for _, clip, _ in cases], embodiment, env_cfg)
     for kind, clip, reference in cases:
-        if clip.object_name not in scenes:
-            scenes[clip.object_name] = make_scene(clip, embodiment, env_cfg)
         env = InteractionEnv(env_cfg, scenes[clip.object_name], [reference])
         spec = student_observation_spec(env)
         if spec != stored["student"].get("obs_spec", spec)[:len(spec)]:

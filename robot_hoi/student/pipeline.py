@@ -59,8 +59,8 @@ from robot_hoi.student.student_env import StudentEnv, fresh_providers
 from robot_hoi.student.task import (
     STUDENT_GROUP,
     evaluation_cfg,
-    make_scene,
     mocap_reference,
+    object_scenes,
     student_env_cfg,
     write_student_task,
 )
@@ -116,7 +116,7 @@ def prepare(args: argparse.Namespace) -> Setup:
         raise UserError("robot-hoi train student: --data does not apply; the student learns its teachers' clips")
     config_path = args.config or PRESETS[args.preset or DEFAULT_PRESET]  # None: no --preset (nor recipe)
     cfg, env_overrides = load_student_config(config_path, getattr(args, "options", []), args.overrides)
-    runs = load_teacher_runs(*([args.teachers] if isinstance(args.teachers, str | Path) else args.teachers))
+    runs = load_teacher_runs(*args.teachers)
     teacher_env_cfg = saved_env_cfg(runs[0].env, f"{runs[0].checkpoint.parent}/task.json")
     teacher_env_cfg = apply_overrides(teacher_env_cfg, [o for o in env_overrides if o.startswith("num_envs=")
                                                         or o.startswith("nthread=")], "--set env.*")
@@ -140,10 +140,7 @@ def prepare(args: argparse.Namespace) -> Setup:
                 clip_teacher.append(index)
     options = clip_options(args, runs[0].task.get("clip_options"))
     clips = [factory.load_source(s, options) for s in sources]
-    scenes: dict[str, object] = {}
-    for clip in clips:
-        if clip.object_name not in scenes:
-            scenes[clip.object_name] = make_scene(clip, embodiment, env_cfg)
+    scenes = object_scenes(clips, embodiment, env_cfg)
     source_run = {s: runs[clip_teacher[i]] for i, s in enumerate(sources)}
     mocap = [mocap_reference(c, embodiment, teacher_env_cfg, source_run[s].checkpoint.parent / "references")
              for c, s in zip(clips, sources, strict=True)]

@@ -51,6 +51,15 @@ def make_scene(clip, embodiment, env_cfg: InteractionEnvCfg):
     return InteractionScene.for_task(embodiment, clip.object, env_cfg)
 
 
+def object_scenes(clips, embodiment, env_cfg: InteractionEnvCfg) -> dict[str, InteractionScene]:
+    """One scene per object the clips use (a scene holds one object), keyed by object name."""
+    scenes: dict[str, InteractionScene] = {}
+    for clip in clips:
+        if clip.object_name not in scenes:
+            scenes[clip.object_name] = make_scene(clip, embodiment, env_cfg)
+    return scenes
+
+
 def write_student_task(folder: Path, *, sources: list[str], references: list[str | None],
                        env_cfg: InteractionEnvCfg, embodiment_name: str, extra: dict) -> None:
     """references[i]: path of clip i's distilled reference relative to `folder`, or None (MoCap retarget)."""
