@@ -264,7 +264,7 @@ def object_group(setup: Setup, clips: list[int], env_cfg: InteractionEnvCfg, dis
     env = InteractionEnv(env_cfg, setup.scenes[clips[0]], [distilled[i][0] for i in clips])
     timeline = ReferenceTimeline([setup.mocap[i] for i in clips], env)
     view = ReferenceView(env, timeline, setup.teacher_env_cfg.keyframes, setup.teacher_env_cfg.warmup_frames,
-                         setup.teacher_env_cfg.teacher_obs)
+                         setup.teacher_env_cfg.teacher_obs, setup.teacher_env_cfg.action_offset)
     teachers = sorted({setup.clip_teacher[i] for i in clips})
     for t in teachers:
         setup.members[t].view = view

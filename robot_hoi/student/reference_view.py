@@ -50,11 +50,12 @@ class ReferenceView:
     """Duck-types the env for observation terms: state attributes come from `env`, references from `timeline`."""
 
     def __init__(self, env, timeline: ReferenceTimeline, keyframes, warmup_frames: int,
-                 teacher_obs: str | None = None) -> None:
+                 teacher_obs: str | None = None, offset_mode: str | None = None) -> None:
         self._env = env
         self._timeline = timeline
         self.cfg = SimpleNamespace(keyframes=tuple(keyframes), warmup_frames=int(warmup_frames),
                                    teacher_obs=teacher_obs or env.cfg.teacher_obs)  # default: as the env's
+        self.offset_mode = offset_mode or env.cfg.action_offset  # the teachers' env.action_offset
 
     def __getattr__(self, name: str):
         return getattr(self._env, name)
@@ -72,14 +73,31 @@ class ReferenceView:
         return self._timeline.frame(torch.minimum(self.index() + k, end), end)
 
     def action_offset(self, mode: str) -> Tensor:
-        """The PD target of a zero action for a policy trained with env.action_offset `mode` on this timeline:
-        the default pose, or the reference joints of the frame the next step moves to (as the env computes it)."""
+        """The PD target of a zero action for a policy trained with env.action_offset `mode` on this timeline, as
+        the env computes its own: the default pose, or the reference joints of the frame the next step moves to
+        (glided in from the start pose during the warmup)."""
+        frame, steps_done = self._env.offset_frame()
+        return self._zero_action_target(mode, self._timeline.joint_pos, self.index(frame), steps_done)
+
+    @property
+    def last_actions(self) -> Tensor:
+        """The env's last action re-expressed around this timeline: the action that sends the same PD targets, which
+        is what a teacher's `last_action` term read in its own env (zero after a reset, as there). Read straight
+        from the env, a teacher on a distilled reference sees its own last action shifted by (distilled - MoCap
+        joints) / scale every step, and falls where it would not (docs/experiments/student.md)."""
+        env = self._env
+        frame, steps_done = env.offset_frame(previous=True)
+        own = self._zero_action_target(env.cfg.action_offset, env.ref_joint_pos, frame, steps_done)
+        theirs = self._zero_action_target(self.offset_mode, self._timeline.joint_pos, self.index(frame), steps_done)
+        clip = env.cfg.action_clip
+        moved = (env.last_actions + (own - theirs) / env.action_scale).clamp(-clip, clip)
+        return torch.where((env.episode_length > 0)[:, None], moved, torch.zeros_like(moved))
+
+    def _zero_action_target(self, mode: str, joint_table: Tensor, frame: Tensor, steps_done: Tensor) -> Tensor:
         env = self._env
         if mode == "default":
             return env.default_joint_pos.expand(env.num_envs, -1)
-        next_index = torch.where(env.warmup_left > 0, env.ref_index,
-                                 torch.minimum(env.ref_index + 1, env.clip_end[env.clip_id]))
-        return self._timeline.joint_pos[self.index(next_index)]
+        return env.zero_action_target(joint_table[frame], steps_done)
 
     def teacher_observation(self) -> Tensor:
         return obs_terms.teacher_observation(self)

@@ -276,14 +276,28 @@ class InteractionEnv:
         positions of the frame this step moves to, so that the policy learns corrections to the retarget."""
         if self.cfg.action_offset == "default":
             return self.default_joint_pos
+        frame, steps_done = self.offset_frame()
+        return self.zero_action_target(self.ref_joint_pos[frame], steps_done)
+
+    def offset_frame(self, previous: bool = False) -> tuple[Tensor, Tensor]:
+        """(reference frame, warmup steps done) behind this step's zero-action target; `previous`: behind the
+        step just taken (it moved the env to the frame it stands at now; 0 steps after a reset: frame only)."""
+        if previous:
+            return self.ref_index, self.episode_length - 1
         in_warmup = self.warmup_left > 0
-        next_index = torch.where(in_warmup, self.ref_index, torch.minimum(self.ref_index + 1, self._clip_end()))
-        target = self.ref_joint_pos[next_index]
+        frame = torch.where(in_warmup, self.ref_index, torch.minimum(self.ref_index + 1, self._clip_end()))
+        return frame, self.warmup_length - self.warmup_left
+
+    def zero_action_target(self, frame_joints: Tensor, steps_done: Tensor) -> Tensor:
+        """The "reference" zero-action target around `frame_joints` (num_envs, J), `steps_done` steps into the
+        episode: inside the warmup it glides from the start pose (warmup_blend). ReferenceView calls it with a
+        teacher's own reference joints."""
         if not self.cfg.warmup_blend:
-            return target
-        steps_done = (self.warmup_length - self.warmup_left)[:, None].float()
-        blended = warmup_offset(self.warmup_start_pos, target, steps_done, self.warmup_length[:, None].clamp(min=1))
-        return torch.where(in_warmup[:, None], blended, target)
+            return frame_joints
+        in_warmup = steps_done < self.warmup_length
+        blended = warmup_offset(self.warmup_start_pos, frame_joints, steps_done[:, None].float(),
+                                self.warmup_length[:, None].clamp(min=1))
+        return torch.where(in_warmup[:, None], blended, frame_joints)
 
     # ---- state --------------------------------------------------------------------------------------------------
     def _clip_end(self) -> Tensor:
