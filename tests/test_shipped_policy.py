@@ -13,9 +13,11 @@ import pytest
 from robot_hoi.paths import POLICIES_DIR
 
 SHIPPED = POLICIES_DIR / "lift_place_student.onnx"
+SKILLS = POLICIES_DIR / "multi_skill_student.onnx"
 BASE = POLICIES_DIR / "base_g1_inspire.pt"
 
 shipped_student = pytest.mark.skipif(not SHIPPED.is_file(), reason="no shipped student in policies/")
+shipped_skills = pytest.mark.skipif(not SKILLS.is_file(), reason="no shipped multi-skill student in policies/")
 shipped_base = pytest.mark.skipif(not BASE.is_file(), reason="no shipped base policy in policies/")
 
 
@@ -41,18 +43,63 @@ def test_shipped_student_lifts_the_box_in_sim2sim(tmp_path):
     assert cell["episodes"] == 8 and cell["success_rate"] >= 0.75 and cell["interaction_success_rate"] >= 0.75
 
 
-@shipped_student
-def test_shipped_student_runs_on_the_dry_run_robot(tmp_path):
+def dry_run(policy, log_dir, *extra, duration=5.0) -> dict:
+    """`robot-hoi deploy --dry-run` of `policy`: its summary, after asserting it exited cleanly without faults."""
     from deploy.cli import main as deploy_main
 
-    code = deploy_main(["--dry-run", "--policy", str(SHIPPED), "--hand-bus", "serial", "--duration", "5",
-                        "--log-dir", str(tmp_path), "--zero-torque-s", "0.1", "--ramp-s", "0.5", "--damp-s", "0.2",
-                        "--auto-start", "--max-input-age-periods", "10", "--max-overruns", "1000",
-                        "--min-hand-rate-share", "0.2", "--status", "plain"])
-    summary = json.loads((tmp_path / "summary.json").read_text())
+    code = deploy_main(["--dry-run", "--policy", str(policy), *extra, "--hand-bus", "serial",
+                        "--duration", str(duration), "--log-dir", str(log_dir), "--zero-torque-s", "0.1",
+                        "--ramp-s", "0.5", "--damp-s", "0.2", "--auto-start", "--max-input-age-periods", "10",
+                        "--max-overruns", "1000", "--min-hand-rate-share", "0.2", "--status", "plain"])
+    summary = json.loads((log_dir / "summary.json").read_text())
     assert code == 0 and summary["faults"] == []
+    return summary
+
+
+@shipped_student
+def test_shipped_student_runs_on_the_dry_run_robot(tmp_path):
+    summary = dry_run(SHIPPED, tmp_path)
     # ~3.8 s of POLICY at 30 Hz; a loaded machine skips deadlines (counted, not faults), the rest ran the policy
     assert summary["policy_steps"] + summary["missed_deadlines"] >= 100 and summary["policy_steps"] >= 60
+
+
+def shipped_skills_contract():
+    from deploy.contract import PolicyContract
+
+    return PolicyContract.from_onnx(SKILLS)
+
+
+@shipped_skills
+def test_shipped_multi_skill_student_meets_the_contract_with_a_sidecar_per_skill():
+    from robot_hoi.cli import main
+
+    assert main(["export", "check", str(SKILLS), "--embodiment", "g1_inspire"]) == 0
+    contract = shipped_skills_contract()
+    assert len(contract.skills) >= 4
+    for name in contract.skills:
+        assert contract.skill_reference(name)[0].is_file(), name
+
+
+@shipped_skills
+@pytest.mark.slow
+def test_shipped_multi_skill_student_completes_four_skills_in_sim2sim(tmp_path):
+    from robot_hoi.cli import main
+
+    # 16 of 16 sim2sim episodes each (Wilson 95 % interval 0.81-1.00; docs/results/README.md#multi_skill_student_sim2sim)
+    # on these four; its walk seed1 and turns fall in sim2sim and are not asserted. 6 of 8 sits below that interval
+    out = tmp_path / "report"
+    main(["sim2sim", "--policy", str(SKILLS), "--suite", "nominal", "--episodes", "8", "--videos", "0", "-q",
+          "-o", str(out)])  # NOT READY (its falling skills): the exit code says so; the cells are checked below
+    cells = {c["clip"]: c for c in json.loads((out / "metrics.json").read_text())["cells"]}
+    for clip in ("synth_lift_place_seed0", "synth_walk_seed2", "synth_squat_seed0", "synth_squat_seed1"):
+        assert cells[clip]["episodes"] == 8 and cells[clip]["success_rate"] >= 0.75, clip
+
+
+@shipped_skills
+def test_every_skill_of_the_shipped_multi_skill_student_runs_on_the_dry_run_robot(tmp_path):
+    for name in shipped_skills_contract().skills:
+        summary = dry_run(SKILLS, tmp_path / name, "--skill", name, duration=2.5)
+        assert summary["policy_steps"] + summary["missed_deadlines"] >= 25, name
 
 
 @shipped_base
