@@ -9,8 +9,6 @@ observation layout must be the same in every group (it is: sizes come from the c
 
 from __future__ import annotations
 
-from types import SimpleNamespace
-
 import torch
 from torch import Tensor
 
@@ -64,7 +62,6 @@ class ObjectGroupsEnv:
         for e in envs:
             bounds.append(bounds[-1] + e.num_envs)
         self.rows = [slice(bounds[k], bounds[k + 1]) for k in range(len(envs))]
-        self.backend = SimpleNamespace(close=self.close, nthread=getattr(first.backend, "nthread", None))
 
     @property
     def clip_id(self) -> Tensor:
@@ -107,9 +104,7 @@ class ObjectGroupsEnv:
 
     def close(self) -> None:
         for e in self.envs:
-            close = getattr(e.backend, "close", None)
-            if close is not None:
-                close()
+            e.close()
 
 
 class GroupedTeacher:

@@ -342,9 +342,7 @@ def train(args: argparse.Namespace, rank: Rank | None = None) -> dict:
     stats = runner.learn(SharedBudget(budget, rank.world_size, rank.device) if rank.distributed else budget)
     rank.wait_for_all()  # the last collective is behind every rank; rank 0's evaluation needs none
     runner.close()
-    close = getattr(student_env.env.backend, "close", None)
-    if close is not None:  # its physics threads stop now (the runner lives on in a reference cycle)
-        close()
+    student_env.close()  # its physics threads stop now (the runner lives on in a reference cycle)
     report = {"rank": rank.rank, "world_size": rank.world_size, "samples": runner.rank_samples,
               "total_samples": runner.total_samples, "iteration": runner.iteration,
               "checksum": state_checksum(runner.model), "checkpoints": [str(p) for p in runner.saved_checkpoints]}

@@ -259,6 +259,12 @@ class InteractionEnv:
         timers.lap("observations")
         return obs, reward, terminated, truncated, extras
 
+    def close(self) -> None:
+        """Stop the backend's physics threads now (the env is not stepped after)."""
+        close = getattr(self.backend, "close", None)
+        if close is not None:
+            close()
+
     # ---- curriculum ---------------------------------------------------------------------------------------------
     def update_curriculum(self, total_samples: int) -> dict[str, float]:
         """Called by the runner before each iteration; returns what to log."""
