@@ -85,30 +85,6 @@ class HullPlanes:
             face[rows] = values[rows, planes.starts[k]:stops[k]].argmax(axis=-1) + planes.starts[k]
         return dist, planes.index[face]
 
-    def ray_entry(self, points: np.ndarray, direction: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Where rays from object-frame `points` (..., 3) along unit `direction` (broadcastable to them) first enter
-        the shape: (distance along the ray (...), inf where none enters; index of the face plane entered (...), -1
-        where none or where the point is already inside)."""
-        values = self.plane_values(points)  # <= 0 inside each plane
-        rate = np.broadcast_to(direction, points.shape) @ self.normals.T
-        with np.errstate(divide="ignore", invalid="ignore"):
-            cross = -values / rate
-        lower = np.where(rate < 0, cross, -np.inf)  # entering through these planes
-        upper = np.where(rate > 0, cross, np.inf)  # leaving through these
-        never = (rate == 0) & (values > 0)  # parallel, outside the plane
-        stops = self.piece_starts[1:] + (len(self.normals),)
-        best = np.full(points.shape[:-1], np.inf)
-        best_face = np.full(points.shape[:-1], -1)
-        for start, stop in zip(self.piece_starts, stops, strict=True):
-            piece = slice(start, stop)
-            face = lower[..., piece].argmax(axis=-1) + start
-            enter = np.maximum(np.take_along_axis(lower, face[..., None], axis=-1)[..., 0], 0.0)
-            hit = (enter <= upper[..., piece].min(axis=-1)) & ~never[..., piece].any(axis=-1)
-            closer = hit & (enter < best)
-            best = np.where(closer, enter, best)
-            best_face = np.where(closer, np.where(enter > 0, face, -1), best_face)
-        return best, best_face
-
     def push_out(self, points: np.ndarray, clearance: float) -> np.ndarray:
         """Points closer than `clearance` to the shape (or inside it) moved out along the nearest face normal
         (of the nearest piece; a second pass for a point pushed into a neighbouring piece)."""

@@ -98,14 +98,6 @@ class TargetMapping:
     # on the box's top edge with the palm off the face. With hand_size_fit, each hand's links are scaled about the
     # human palm (wrist-to-middle-knuckle midpoint) to the robot hand's size first, so the palms coincide.
     hand_size_fit: bool = True
-    # OMOMO hands are flat (no finger capture): a human pinching a tabletop's edge has straight fingers pointing
-    # down past it, and the robot's fingertips follow them 8-13 cm below the top (sub2_largetable_000). A fingertip
-    # target near the object (anchored at all) with the object's underside (a face whose normal points down) at
-    # most this far straight above it is moved up to object_clearance below that face (0.15 m reaches them).
-    # Off (0) by default: measured on sub2_largetable_000
-    # (fingers closed, squeeze into the surface) the root-held zero-residual replay from frame 50 keeps the table
-    # within 0.12 m for ~38 frames with or without it, and a 30-min teacher tracks 2.27 s either way (README).
-    fingertip_underside_reach: float = 0.0  # m
     # What the simulation collides with (and the IK keeps the hands out of): "hull", the mesh's convex hull, or
     # "decomposed", its convex pieces (ObjectAsset.convex_parts), so a hand can reach under a table's top.
     object_collision: str = "hull"
@@ -122,8 +114,6 @@ class TargetMapping:
         if self.anchor_radius <= 0:
             raise DataError(f"anchor_radius must be > 0, got {self.anchor_radius}")
         check_object_collision(self.object_collision)
-        if self.fingertip_underside_reach < 0:
-            raise DataError(f"fingertip_underside_reach must be >= 0 m, got {self.fingertip_underside_reach}")
         missing = set(GROUPS) - set(self.group_weights)
         if missing:
             raise DataError(f"group_weights lacks {sorted(missing)}")
@@ -248,13 +238,12 @@ def map_positions(
     contact_labels: np.ndarray | None = None,
     local_distance: Callable[[np.ndarray], np.ndarray] | None = None,
     hull: HullPlanes | None = None,
-    fingertips: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The core of the mapping on plain arrays.
 
     human_pos (T, L, 3) real-scale link positions; root_xy (T, 2); object pose (T, 3) + (T, 4 xyzw); points_local
     (P, 3); contact_labels (T, L) or None; local_distance: see `surface_distance`; hull: the object's convex hull
-    for mapping.object_clearance; fingertips: indices of the fingertip links (mapping.fingertip_underside_reach).
+    for mapping.object_clearance.
     Returns (targets (T, L, 3), anchor (T, L), robot object pos (T, 3), human surface distance (T, L)).
     """
     scaled = scale_body(human_pos, root_xy, s)
@@ -268,23 +257,7 @@ def map_positions(
         local = hull.push_out(local, mapping.object_clearance)
     anchored = np.einsum("tij,tlj->tli", rot_r, local) + obj_robot[:, None, :]
     targets = a[..., None] * anchored + (1.0 - a[..., None]) * scaled
-    if hull is not None and fingertips is not None and len(fingertips) and mapping.fingertip_underside_reach > 0:
-        targets[:, fingertips] = fingertips_to_underside(targets[:, fingertips], a[:, fingertips] > 0, obj_robot,
-                                                         rot_r, hull, mapping)
     return targets, a, obj_robot, dist
-
-
-def fingertips_to_underside(tips: np.ndarray, near: np.ndarray, obj_pos: np.ndarray, obj_rot: np.ndarray,
-                            hull: HullPlanes, mapping: TargetMapping) -> np.ndarray:
-    """Fingertip targets (T, F, 3) where `near` (T, F) and an underside of the object (pose obj_pos (T, 3), obj_rot
-    (T, 3, 3)) lies within mapping.fingertip_underside_reach straight above: moved up to object_clearance below it."""
-    up = obj_rot[:, 2, :]  # world z in the object frame: row 2 of R (R maps object -> world)
-    local = np.einsum("tji,tfj->tfi", obj_rot, tips - obj_pos[:, None, :])
-    rise, face = hull.ray_entry(local, up[:, None, :])
-    facing_down = np.einsum("tfk,tk->tf", hull.normals[face], up) < -0.7
-    clearance = mapping.object_clearance or 0.0
-    move = near & (face >= 0) & facing_down & (rise <= mapping.fingertip_underside_reach) & (rise > clearance)
-    return tips + np.where(move, rise - clearance, 0.0)[..., None] * np.array([0.0, 0.0, 1.0])
 
 
 def planted(foot_pos: np.ndarray, fps: float, height: float, speed: float) -> np.ndarray:
@@ -378,10 +351,9 @@ def targets_from_clip(clip, cfg, scale: float | None = None, mapping: TargetMapp
         human_pos = fit_hand_size(body_pos, human_pos, list(link_map.values()), hand_length)
 
     groups = [link_group(h) for h in link_map.values()]
-    fingertips = np.array([i for i, g in enumerate(groups) if g == "fingers"], dtype=np.int64)
     pos, a, obj_robot, dist = map_positions(
         human_pos, body_pos[:, 0, :2], obj_pos, obj_quat_xyzw, points_local, scale, mapping, labels, local_distance,
-        hull, fingertips)
+        hull)
     base_w = np.array([mapping.group_weights[g] for g in groups])
     weight = base_w[None, :] + mapping.anchor_weight * a
     pin_feet(pos, weight, [i for i, g in enumerate(groups) if g == "feet"], float(clip.fps), mapping)

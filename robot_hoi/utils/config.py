@@ -222,9 +222,12 @@ def _convert_dataclass(cls: type, value: Any, source: str, key: str) -> Any:
     if unknown:
         prefix = f"{key}." if key else ""
         moved = getattr(cls, "MOVED_KEYS", {})  # a dataclass's old spellings of keys: old -> its spelling now
+        removed = getattr(cls, "REMOVED_KEYS", {})  # keys that are gone: name -> why, and what does it now
         for name in unknown:
             if name in moved:
                 raise UserError(f"{source}: {prefix}{name} has moved: it is spelled {moved[name]} now")
+            if name in removed:
+                raise UserError(f"{source}: {prefix}{name} was removed: {removed[name]}")
         raise UserError(
             f"{source}: unknown key(s) {', '.join(prefix + str(u) for u in unknown)} "
             f"(known: {', '.join(sorted(fields))})"

@@ -51,20 +51,6 @@ TABLE = HullPlanes.from_pieces([
 ])
 
 
-def test_ray_entry_finds_the_underside_above_a_point():
-    up = np.array([0.0, 0.0, 1.0])
-    pts = np.array([[0.0, 0.0, 0.5], [0.26, 0.26, -0.1], [0.5, 0.0, 0.5], [0.0, 0.0, 0.62], [0.0, 0.0, 0.7]])
-    rise, face = TABLE.ray_entry(pts, up)
-    np.testing.assert_allclose(rise[:2], [0.1, 0.1], atol=1e-12)  # the top's underside; the leg's foot
-    for f in face[:2]:
-        np.testing.assert_allclose(TABLE.normals[f], [0.0, 0.0, -1.0], atol=1e-12)
-    assert np.isinf(rise[2]) and face[2] == -1  # beside the table
-    assert rise[3] == 0.0 and face[3] == -1  # inside the top
-    assert np.isinf(rise[4])  # above it
-    rise, _ = TABLE.ray_entry(np.array([[0.0, 0.0, 0.5]]), np.array([1.0, 0.0, 0.0]))
-    assert np.isinf(rise[0])  # sideways under the top: the leg is not in the way (y 0)
-
-
 def test_signed_distance_is_the_nearest_piece_of_each_pieces_nearest_face():
     """The vectorised distance equals its definition, piece by piece, for any leading shape (ties: first piece)."""
     rng = np.random.default_rng(0)
@@ -95,41 +81,6 @@ def test_the_broad_phase_is_exact_within_its_range_and_a_lower_bound_beyond():
         assert (dist[~near] >= within).all() and (dist[~near] <= exact[~near] + 1e-12).all()
     one, _ = planes.signed_distance(pts[0], 0.05)
     assert one.shape == ()
-
-
-def test_fingertips_under_a_tabletop_move_onto_its_underside_and_no_others():
-    from robot_hoi.retarget.targets import fingertips_to_underside
-
-    # the table at (1, 0, 0), turned 90 deg about z (the rule looks straight up in the world, whatever the yaw)
-    obj_pos = np.array([[1.0, 0.0, 0.0]])
-    rot = np.array([[[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]])
-    tips = np.array([[[1.0, 0.0, 0.50],    # 10 cm under the top: up to 1 cm below it
-                      [1.0, 0.0, 0.40],    # 20 cm under: beyond the 15 cm reach
-                      [1.5, 0.0, 0.50],    # beside the table
-                      [1.0, 0.1, 0.55],    # 5 cm under, but not near the object (not anchored)
-                      [1.0, 0.0, 0.595]]])  # already within the clearance: left alone
-    near = np.array([[True, True, True, False, True]])
-    out = fingertips_to_underside(tips, near, obj_pos, rot, TABLE, TargetMapping(fingertip_underside_reach=0.15))
-    np.testing.assert_allclose(out[0, 0], [1.0, 0.0, 0.59], atol=1e-12)
-    np.testing.assert_allclose(out[0, 1:], tips[0, 1:])
-    off = fingertips_to_underside(tips, near, obj_pos, rot, TABLE, TargetMapping())  # off by default
-    np.testing.assert_allclose(off, tips)
-
-
-def test_a_box_held_by_its_sides_keeps_its_fingertip_targets():
-    # the rule acts on undersides only: the embedded clips (boxes gripped by their sides) do not change
-    from dataclasses import replace
-
-    from robot_hoi.data.synth import embedded_clip
-    from robot_hoi.embodiment import load_embodiment
-    from robot_hoi.retarget.targets import targets_from_clip
-
-    clip, cfg = embedded_clip("lift_place"), load_embodiment("g1_inspire")
-    mapping = TargetMapping(object_collision="decomposed")
-    on = targets_from_clip(clip, cfg, mapping=replace(mapping, fingertip_underside_reach=0.15),
-                           hand_length={"left": 0.25, "right": 0.25})
-    off = targets_from_clip(clip, cfg, mapping=mapping, hand_length={"left": 0.25, "right": 0.25})
-    np.testing.assert_array_equal(on.pos, off.pos)
 
 
 # A fixed-base arm whose "hand" carries a capsule finger; the object is a 1 m cube centred at (0.9, 0, 0.5).

@@ -14,7 +14,7 @@ from robot_hoi.paths import TASK_CONFIG
 from robot_hoi.retarget.pipeline import RetargetOptions
 from robot_hoi.tasks.interaction import factory
 from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg, RetargetCfg, saved_env_cfg, split_overrides
-from robot_hoi.utils.config import load_yaml_dataclass
+from robot_hoi.utils.config import load_dataclass, load_yaml_dataclass
 
 # A run's task.json before the retarget: block: its settings were flat env keys (here the table-drag recipe's, with
 # leg loads on); saved_env_cfg moves them into the block.
@@ -38,8 +38,8 @@ def test_the_shipped_config_retargets_with_the_retargets_own_defaults():
                               grasp_plan=replace(defaults.grasp_plan, object_density=25.0))
     assert (options.executable.compensate_leg_loads, options.executable.compensate_dynamics, options.grasp.closure,
             options.executable.squeeze_toward, options.executable.squeeze_depth,
-            options.mapping.fingertip_underside_reach, options.ik.solver, options.grasp_plan.enabled,
-            options.mapping.anchor_mode) == (False, False, 0.6, "other_hand", 0.06, 0.0, "dls", False, "distance")
+            options.ik.solver, options.grasp_plan.enabled,
+            options.mapping.anchor_mode) == (False, False, 0.6, "other_hand", 0.06, "dls", False, "distance")
     assert factory.retarget_options(InteractionEnvCfg()) == replace(
         defaults, grasp_plan=replace(defaults.grasp_plan, object_density=25.0))
 
@@ -219,16 +219,21 @@ def test_a_cached_reference_of_another_version_of_the_clip_is_refused(tmp_path):
         factory.load_or_retarget(clip.select_frames(slice(0, clip.num_frames - 5)), embodiment, tmp_path)
 
 
-def test_fingertip_underside_reach_reaches_the_reference_and_guards_the_cache(tmp_path, table_object):
+def test_the_removed_fingertip_underside_reach_is_refused_by_name_and_in_old_caches(tmp_path):
+    """A config that still sets it is an error saying why it went; a run saved with it off still loads; a cached
+    reference made with it on is refused, not silently reused."""
+    with pytest.raises(UserError, match=r"retarget.fingertip_underside_reach was removed: .*grasp"):
+        load_dataclass(InteractionEnvCfg, {"retarget": {"fingertip_underside_reach": 0.15}}, "task.yaml")
+    saved = asdict(InteractionEnvCfg())
+    saved["retarget"]["fingertip_underside_reach"] = None
+    assert saved_env_cfg(saved, "task.json").retarget == RetargetCfg()
     embodiment = load_embodiment("g1_inspire")
-    clip = replace(factory.load_source("embedded:lift_place"), object=table_object)
-    on = InteractionEnvCfg(num_envs=2, backend="cpu", object_collision="decomposed",
-                           retarget=RetargetCfg(fingertip_underside_reach=0.15))
-    motion = factory.load_or_retarget(clip, embodiment, tmp_path, factory.retarget_options(on))
-    assert motion.meta["mapping"]["fingertip_underside_reach"] == 0.15
-    with pytest.raises(UserError, match=r"fingertip underside reach 0.15, the task asks for it 0 "):
-        factory.load_or_retarget(clip, embodiment, tmp_path,
-                                 factory.retarget_options(InteractionEnvCfg(object_collision="decomposed")))
+    clip = factory.load_source("embedded:lift_place")
+    motion = factory.load_or_retarget(clip, embodiment, tmp_path)
+    motion.meta["mapping"]["fingertip_underside_reach"] = 0.15
+    motion.save(tmp_path / f"{clip.name}.npz")
+    with pytest.raises(UserError, match=r"fingertip_underside_reach 0.15, a setting that was removed"):
+        factory.load_or_retarget(clip, embodiment, tmp_path)
 
 
 def test_squeeze_depth_scales_the_arm_squeeze_and_guards_the_cache(tmp_path):

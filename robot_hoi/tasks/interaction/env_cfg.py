@@ -159,6 +159,12 @@ class RetargetCfg:
     RetargetOptions; None: the retarget's own default. Each is recorded in the cached reference: a cache made with
     another value is an error, not silently reused."""
 
+    # settings that are gone, and why (a saved run holding one at its neutral value still loads: saved_env_cfg)
+    REMOVED_KEYS: ClassVar[dict[str, str]] = {
+        "fingertip_underside_reach": "it did not help the table teacher (docs/experiments/omomo_table_sub2_largetable"
+                                     ".md), and the grasp's hook closes the fingers under a tabletop (retarget.grasp)",
+    }
+
     # the IK: "dls" (damped least squares + repairs) | "qp" (constrained QP, retarget/qp.py); None: the retarget's dls
     solver: str | None = None
     # hands in held segments: the human's placement (False) or grasps planned for the Inspire hand (True,
@@ -180,9 +186,6 @@ class RetargetCfg:
     # m the holding hands' PD targets go past the surface (retarget ExecutableSettings.squeeze_depth; None: the
     # retarget's 0.06)
     squeeze_depth: float | None = None
-    # m: fingertip targets this far (at most) under an underside of the object move up onto it (retarget
-    # TargetMapping.fingertip_underside_reach; None: the retarget's 0, off)
-    fingertip_underside_reach: float | None = None
     # anchor weights (links that follow the object): "distance" (from the distance to the object) | "contact" (the
     # clip's per-body contact labels where it has them; retarget TargetMapping.anchor_mode); None: the retarget's
     # "distance"
@@ -208,8 +211,6 @@ class RetargetCfg:
             from robot_hoi.retarget.executable import check_squeeze_depth
 
             check_squeeze_depth(self.squeeze_depth, "retarget.squeeze_depth")
-        if self.fingertip_underside_reach is not None and not self.fingertip_underside_reach >= 0.0:
-            raise UserError(f"retarget.fingertip_underside_reach must be >= 0 m, got {self.fingertip_underside_reach}")
         if self.anchor_mode is not None:
             from robot_hoi.retarget.targets import ANCHOR_MODES
 
@@ -306,6 +307,9 @@ def saved_env_cfg(data: dict, source: str) -> InteractionEnvCfg:
     for old, new in LEGACY_RETARGET_KEYS.items():
         if old in data:
             block[new] = data.pop(old)
+    for name in RetargetCfg.REMOVED_KEYS:  # saved at its neutral value (None or 0): the behaviour is today's
+        if name in block and not block[name]:
+            del block[name]
     if block:
         data["retarget"] = block
     return load_dataclass(InteractionEnvCfg, data, source)

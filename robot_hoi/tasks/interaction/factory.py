@@ -99,11 +99,15 @@ _RETARGET_SETTINGS = (
     ("retarget.squeeze_toward", ("executable", "squeeze_toward"), "squeeze"),
     ("retarget.squeeze_depth", ("executable", "squeeze_depth"), "squeeze depth"),
     ("env.object_collision", ("mapping", "object_collision"), "object collision shape"),
-    ("retarget.fingertip_underside_reach", ("mapping", "fingertip_underside_reach"), "fingertip underside reach"),
     ("retarget.solver", ("ik", "solver"), "IK solver"),
     ("retarget.grasp", ("grasp_plan", "enabled"), "grasp planning"),
     ("retarget.anchor_mode", ("mapping", "anchor_mode"), "anchor mode"),
 )
+
+
+# Retarget settings that were removed, as a cached reference records them (meta group, name): a reference made with
+# one on is refused (RetargetCfg.REMOVED_KEYS says why each went)
+_REMOVED_SETTINGS = (("mapping", "fingertip_underside_reach"),)
 
 
 def _task_setting(env_cfg: InteractionEnvCfg, key: str):
@@ -139,6 +143,10 @@ def load_or_retarget(clip, embodiment, cache: Path | None, options=None):
             raise UserError(f"{path}: this reference was retargeted from another version of clip {clip.name} "
                             f"({motion.num_frames} frames, the clip has {clip.num_frames}); delete the file to "
                             "retarget, or use the clip it was made from")
+        for group, name in _REMOVED_SETTINGS:
+            if motion.meta.get(group, {}).get(name):
+                raise UserError(f"{path}: this reference was retargeted with {name} {motion.meta[group][name]}, a "
+                                "setting that was removed; delete the file to retarget")
         defaults = retarget_options()
         for setting, (group, name), label in _RETARGET_SETTINGS:
             default = getattr(getattr(defaults, group), name)
