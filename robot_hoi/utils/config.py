@@ -55,13 +55,16 @@ def apply_overrides(obj: T, overrides: list[str], source: str = "overrides") -> 
     data = dataclasses.asdict(obj)
     for item in overrides:
         parts, value = parse_override(item)
-        node = data
+        node, owner = data, obj  # owner: the dataclass `node` was made from (its REMOVED_KEYS say why a key went)
         for depth, part in enumerate(parts):
+            removed = getattr(owner, "REMOVED_KEYS", {})
+            if isinstance(node, dict) and part not in node and part in removed:
+                raise UserError(f"override {item!r}: {'.'.join(parts)} was removed: {removed[part]}")
             _check_key(node, parts[: depth + 1], f"override {item!r}")
             if depth == len(parts) - 1:
                 node[part] = value
             else:
-                node = node[part]
+                node, owner = node[part], getattr(owner, part, None)
     return load_dataclass(type(obj), data, f"{source} + overrides")
 
 

@@ -14,7 +14,7 @@ from robot_hoi.paths import TASK_CONFIG
 from robot_hoi.retarget.pipeline import RetargetOptions
 from robot_hoi.tasks.interaction import factory
 from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg, RetargetCfg, saved_env_cfg, split_overrides
-from robot_hoi.utils.config import load_dataclass, load_yaml_dataclass
+from robot_hoi.utils.config import apply_overrides, load_dataclass, load_yaml_dataclass
 
 # A run's task.json before the retarget: block: its settings were flat env keys (here the table-drag recipe's, with
 # leg loads on); saved_env_cfg moves them into the block.
@@ -224,6 +224,8 @@ def test_the_removed_fingertip_underside_reach_is_refused_by_name_and_in_old_cac
     reference made with it on is refused, not silently reused."""
     with pytest.raises(UserError, match=r"retarget.fingertip_underside_reach was removed: .*grasp"):
         load_dataclass(InteractionEnvCfg, {"retarget": {"fingertip_underside_reach": 0.15}}, "task.yaml")
+    with pytest.raises(UserError, match=r"retarget.fingertip_underside_reach=0.15.*was removed: .*grasp"):
+        apply_overrides(InteractionEnvCfg(), ["retarget.fingertip_underside_reach=0.15"], "--set")
     saved = asdict(InteractionEnvCfg())
     saved["retarget"]["fingertip_underside_reach"] = None
     assert saved_env_cfg(saved, "task.json").retarget == RetargetCfg()
