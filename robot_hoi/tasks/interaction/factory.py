@@ -22,7 +22,7 @@ from robot_hoi.retarget.feasibility import kinematic_feasibility
 from robot_hoi.retarget.motion import RobotMotion
 from robot_hoi.retarget.pipeline import RetargetOptions, retarget_clip
 from robot_hoi.tasks.interaction.env import InteractionEnv
-from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg
+from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg, RetargetCfg
 from robot_hoi.tasks.interaction.reference import build_reference
 from robot_hoi.tasks.interaction.scene_setup import InteractionScene
 from robot_hoi.utils.fingerprint import fingerprint
@@ -103,11 +103,7 @@ _RETARGET_SETTINGS = (
     ("retarget.grasp", ("grasp_plan", "enabled"), "grasp planning"),
     ("retarget.anchor_mode", ("mapping", "anchor_mode"), "anchor mode"),
 )
-
-
-# Retarget settings that were removed, as a cached reference records them (meta group, name): a reference made with
-# one on is refused (RetargetCfg.REMOVED_KEYS says why each went)
-_REMOVED_SETTINGS = (("mapping", "fingertip_underside_reach"),)
+_RETARGET_GROUPS = tuple(dict.fromkeys(group for _, (group, _), _ in _RETARGET_SETTINGS))  # where a cache records them
 
 
 def _task_setting(env_cfg: InteractionEnvCfg, key: str):
@@ -143,10 +139,12 @@ def load_or_retarget(clip, embodiment, cache: Path | None, options=None):
             raise UserError(f"{path}: this reference was retargeted from another version of clip {clip.name} "
                             f"({motion.num_frames} frames, the clip has {clip.num_frames}); delete the file to "
                             "retarget, or use the clip it was made from")
-        for group, name in _REMOVED_SETTINGS:
-            if motion.meta.get(group, {}).get(name):
-                raise UserError(f"{path}: this reference was retargeted with {name} {motion.meta[group][name]}, a "
-                                "setting that was removed; delete the file to retarget")
+        for name in RetargetCfg.REMOVED_KEYS:  # a removed setting left on in the cache: refused, not ignored
+            made_with = next((motion.meta[group][name] for group in _RETARGET_GROUPS
+                              if motion.meta.get(group, {}).get(name)), None)
+            if made_with:
+                raise UserError(f"{path}: this reference was retargeted with {name} {made_with}, a setting that was "
+                                "removed; delete the file to retarget")
         defaults = retarget_options()
         for setting, (group, name), label in _RETARGET_SETTINGS:
             default = getattr(getattr(defaults, group), name)
