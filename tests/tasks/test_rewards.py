@@ -153,6 +153,59 @@ def test_new_terms_are_registered():
         assert R.REWARD_TERMS[name] is getattr(R, name)
 
 
+# ---- the tracking set's terms (issue 48, item 4) --------------------------------------------------------------------
+def test_velocity_costs_read_the_reference_velocities():
+    """Body links' world linear velocities (hands excluded) and body joints' velocities, mean squared errors."""
+    ref_vel = torch.zeros(1, 6, 3, dtype=F64)
+    env = _env(link_vel=ref_vel.clone(), joint_vel=torch.zeros(1, 5, dtype=F64))
+    env.ref.link_vel, env.ref.joint_vel = ref_vel, torch.zeros(1, 5, dtype=F64)
+    assert R.link_velocity_cost(env).item() == 0.0 and R.joint_velocity_cost(env).item() == 0.0
+    env.link_vel = ref_vel.clone()
+    env.link_vel[0, 1] = torch.tensor([0.0, 2.0, 0.0], dtype=F64)   # the knee 2 m/s off: 4 / 4 body links
+    env.link_vel[0, 5] = torch.tensor([9.0, 0.0, 0.0], dtype=F64)   # a fingertip: not a body link
+    assert R.link_velocity_cost(env).item() == pytest.approx(1.0)
+    env.joint_vel = torch.tensor([[0.0, 3.0, 0.0, 7.0, 7.0]], dtype=F64)  # hand joints (3, 4) do not count
+    assert R.joint_velocity_cost(env).item() == pytest.approx(3.0)
+
+
+def test_object_relative_costs_follow_the_pelvis():
+    """The object relative to the pelvis in its heading frame: robot and object moved and turned together cost 0;
+    the object 0.1 m off the pelvis' frame costs 0.01; tilted 0.5 rad in that frame, 0.25."""
+    yaw = torch.tensor([0.7], dtype=F64)
+    heading = quat_to_matrix(quat_from_yaw(yaw))
+    shift = torch.tensor([[1.0, -2.0, 0.0]], dtype=F64)
+    ref = _env().ref
+    obj = (ref.object_pos - ref.root_pos) @ heading[0].T + ref.root_pos + shift
+    env = _env(root_pos=ref.root_pos + shift, heading_matrix=heading, object_pos=obj,
+               object_rotmat=heading.clone())
+    env.ref.object_rotmat = torch.eye(3, dtype=F64)[None]
+    assert R.object_relative_position_cost(env).item() == pytest.approx(0.0, abs=1e-12)
+    assert R.object_relative_rotation_cost(env).item() == pytest.approx(0.0, abs=1e-12)
+    env.object_pos = obj + torch.tensor([[0.0, 0.0, 0.1]], dtype=F64)
+    assert R.object_relative_position_cost(env).item() == pytest.approx(0.01)
+    env.object_rotmat = heading @ quat_to_matrix(_quat_x(0.5)[None])
+    assert R.object_relative_rotation_cost(env).item() == pytest.approx(0.25)
+
+
+def test_held_contact_cost_counts_required_hands_without_contact():
+    env = _env(hand_contact_found=torch.tensor([[True, False], [False, False], [True, True]]))
+    env.ref.hand_contact = torch.tensor([[True, True], [False, True], [False, False]])
+    assert R.held_contact_cost(env).tolist() == [1.0, 1.0, 0.0]  # a contact nobody asked for costs nothing here
+
+
+def test_action_rate_and_joint_limit_penalties():
+    env = _env(actions=torch.tensor([[1.0, 0.0, -1.0]]), last_actions=torch.tensor([[0.5, 0.0, 1.0]]))
+    assert R.action_rate_cost(env).item() == pytest.approx(0.25 + 4.0)
+    # soft limits (0.9) of the body joints: [-0.9, 0.9], [0.1, 1.9], [0, 0.9]; joints 3, 4 are the hand's
+    low, high = torch.tensor([-1.0, 0.0, -0.05, 0.0, 0.0]), torch.tensor([1.0, 2.0, 0.95, 1.0, 1.0])
+    pos = torch.tensor([[0.5, 1.0, 0.0, 0.0, 0.0], [0.95, 0.0, 0.0, 1.0, 1.0], [-1.0, 2.0, 1.0, 0.0, 0.0]])
+    env = _env(ctrl_low=low, ctrl_high=high, joint_pos=pos)
+    env.ref.joint_state = torch.tensor([[0.0, 1.0, 0.45, 0.0, 0.0]])  # the reference inside the soft limits
+    assert R.joint_limit_cost(env).tolist() == pytest.approx([0.0, 0.05 + 0.1, 0.1 + 0.1 + 0.1])
+    env.ref.joint_state = torch.tensor([[0.97, 1.0, 0.45, 0.0, 0.0]])  # the reference itself past joint 0's limit
+    assert R.joint_limit_cost(env).tolist() == pytest.approx([0.0, 0.0 + 0.1, 0.1 + 0.1 + 0.1])
+
+
 # ---- aggregation ---------------------------------------------------------------------------------------------------
 def test_aggregate_product_and_sum():
     costs = {"a": torch.tensor([1.0, 0.0]), "b": torch.tensor([0.5, 2.0])}
@@ -168,6 +221,16 @@ def test_aggregate_product_and_sum():
     assert torch.allclose(R.aggregate(costs, weights, "sum")[0], (exp_a + exp_b) / 2)  # no scales: the mean
     with pytest.raises(ValueError):
         R.aggregate(costs, weights, "max")
+
+
+def test_aggregate_subtracts_penalty_terms_as_they_are():
+    """A penalty term is -lambda E on top of either aggregate, outside the sum's normalisation, logged negative."""
+    costs = {"a": torch.tensor([1.0, 0.0]), "rate": torch.tensor([2.0, 30.0])}
+    weights = {"a": 2.0, "rate": 0.01}
+    for mode in ("sum", "product"):
+        reward, per_term = R.aggregate(costs, weights, mode, {"a": 3.0}, penalties=frozenset({"rate"}))
+        assert torch.allclose(reward, torch.exp(-2.0 * costs["a"]) - 0.01 * costs["rate"])
+        assert torch.allclose(per_term["rate"], torch.tensor([-0.02, -0.3]))
 
 
 # ---- the reward sets ------------------------------------------------------------------------------------------------
@@ -256,3 +319,17 @@ def test_a_reward_set_with_a_base_holds_only_its_changes(tmp_path):
     (tmp_path / "typo.yaml").write_text("base: anchor_additive\nreward: {}\n")
     with pytest.raises(UserError, match=r"typo\.yaml: unknown key\(s\) reward"):
         load_reward_set(str(tmp_path / "typo.yaml"))
+
+
+def test_reference_link_velocities_are_the_links_finite_differences():
+    """The env's reference link velocities (what link_velocity_cost compares with): a link moving at a constant
+    1.5 m/s along x in a 30 fps clip has velocity 1.5 at every frame, ends included; a one-frame clip, zero."""
+    from robot_hoi.tasks.interaction.env import link_velocities
+
+    frames = torch.arange(5, dtype=torch.float32)[:, None, None]
+    link_pos = torch.cat([frames * torch.tensor([0.05, 0.0, 0.0]), torch.zeros(5, 1, 3)], dim=1)  # (5, 2, 3)
+    ref = SimpleNamespace(fps=30.0, link_pos=link_pos, num_frames=5)
+    vel = link_velocities(ref)
+    assert vel.shape == (5, 2, 3)
+    assert torch.allclose(vel[:, 0, 0], torch.full((5,), 1.5)) and vel[:, 1].abs().max() == 0
+    assert link_velocities(SimpleNamespace(fps=30.0, link_pos=link_pos[:1], num_frames=1)).abs().max() == 0

@@ -54,6 +54,8 @@ class ReferenceFrame:
     root_quat_wxyz: Tensor
     joint_pos: Tensor    # PD targets of a zero action: the state's joints plus the grasp squeeze and load offsets
     joint_state: Tensor  # the reference state's actuated joints (what a robot on the reference measures)
+    joint_vel: Tensor    # the reference state's actuated joint velocities
+    link_vel: Tensor     # (L, 3) world linear velocities of the mapped links (finite differences of link_pos)
     link_rotmat: Tensor
     object_rotmat: Tensor
     root_rotmat: Tensor
@@ -111,8 +113,12 @@ class InteractionEnv:
         self.reward_funcs = {n: (reward_terms.REWARD_TERMS[t.func], t.params)
                              for n, t in cfg.rewards.items() if t is not None}
         self.reward_scales = {n: t.scale for n, t in cfg.rewards.items() if t is not None}
+        self.reward_penalties = frozenset(n for n, t in cfg.rewards.items() if t is not None and t.kind == "penalty")
         if cfg.reward_mode not in ("product", "sum"):
             raise UserError(f"env.reward_mode must be 'product' or 'sum', not {cfg.reward_mode!r}")
+        for name, term in cfg.rewards.items():
+            if term is not None and term.kind not in ("exp", "penalty"):
+                raise UserError(f"env.rewards.{name}.kind must be 'exp' or 'penalty', not {term.kind!r}")
         self.object_mass = torch.full((cfg.num_envs,), scene.object_mass, device=self.device)  # kg, per env
         self.object_mass_levels = object_mass_levels(scene.object_mass, cfg.randomization.object_mass_scale)
         if self.object_mass_levels is not None:
@@ -163,6 +169,8 @@ class InteractionEnv:
         self.ref_robot_qpos, self.ref_robot_qvel = cat("robot_qpos"), cat("robot_qvel")
         self.ref_joint_pos = cat("joint_pos")
         self.ref_joint_state = self.ref_robot_qpos[:, torch.as_tensor(self.layout.actuator_qpos, device=self.device)]
+        self.ref_joint_vel = self.ref_robot_qvel[:, torch.as_tensor(self.layout.actuator_dof, device=self.device)]
+        self.ref_link_vel = torch.cat([link_velocities(r) for r in references]).to(self.device)
         # rotation matrices of the whole reference, computed once (the observation terms use matrices)
         self.ref_link_rotmat = quat_to_matrix(self.ref_link_quat)
         self.ref_object_rotmat = quat_to_matrix(self.ref_object_quat)
@@ -228,7 +236,8 @@ class InteractionEnv:
         self._update_history()
 
         costs = {name: func(self, **params) for name, (func, params) in self.reward_funcs.items()}
-        reward, per_term = reward_terms.aggregate(costs, self.reward_weights, self.cfg.reward_mode, self.reward_scales)
+        reward, per_term = reward_terms.aggregate(costs, self.reward_weights, self.cfg.reward_mode, self.reward_scales,
+                                                   self.reward_penalties)
         for name, value in per_term.items():
             self.episode_sums[name] += value
         self._accumulate_metrics(~in_warmup)
@@ -618,9 +627,17 @@ def reference_frame(ref, idx: Tensor) -> ReferenceFrame:
         object_pos=ref.ref_object_pos[idx], object_quat_wxyz=ref.ref_object_quat[idx],
         hand_contact=ref.ref_hand_contact[idx], hand_distance=ref.ref_hand_distance[idx],
         root_pos=ref.ref_robot_qpos[idx, 0:3], root_quat_wxyz=ref.ref_robot_qpos[idx, 3:7],
-        joint_pos=ref.ref_joint_pos[idx], joint_state=ref.ref_joint_state[idx], link_rotmat=ref.ref_link_rotmat[idx],
+        joint_pos=ref.ref_joint_pos[idx], joint_state=ref.ref_joint_state[idx], joint_vel=ref.ref_joint_vel[idx],
+        link_vel=ref.ref_link_vel[idx], link_rotmat=ref.ref_link_rotmat[idx],
         object_rotmat=ref.ref_object_rotmat[idx], root_rotmat=ref.ref_root_rotmat[idx],
     )
+
+
+def link_velocities(ref: ReferenceMotion) -> Tensor:
+    """(T, L, 3) world linear velocities of a reference's links: central differences of its link positions."""
+    if ref.num_frames < 2:
+        return torch.zeros_like(ref.link_pos)
+    return torch.gradient(ref.link_pos, spacing=1.0 / ref.fps, dim=0)[0]
 
 
 def object_mass_levels(mass: float, scale: tuple[float, float], step: float = 1.02) -> Tensor | None:

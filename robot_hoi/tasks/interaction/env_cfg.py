@@ -23,6 +23,7 @@ class RewardTermCfg:
     weight: float                  # lambda of exp(-lambda * E)
     params: dict[str, float | bool] = field(default_factory=dict)
     scale: float = 1.0             # the term's share in the "sum" aggregation (ignored by "product")
+    kind: str = "exp"              # "exp": exp(-lambda * E) | "penalty": -lambda * E added to the reward as it is
 
 
 PAPER_REWARD_SET = "intermimic_paper"

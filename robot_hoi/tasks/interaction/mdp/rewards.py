@@ -5,6 +5,8 @@ Two aggregations (env.reward_mode):
 - "sum" (BeyondMimic-style): R = sum_i s_i exp(-lambda_i * E_i) / sum_i s_i, s_i = the term's `scale`; every term
   that is right pays on its own, so a policy still learns to balance while its hands are off.
 The env logs exp(-lambda_i * E_i) of every term on its own.
+A term of kind "penalty" is not exponentiated: it subtracts lambda_i * E_i from either aggregate (action rate,
+joint limits: BeyondMimic's regularisers, which must keep costing however large they get).
 
 Robot version (supp. F): positions and rotations of the robot links mapped to SMPL-X bodies, w_d from the
 link-to-object distances of simulation and reference (Eq. 2). Rotation and position costs are w-weighted means
@@ -104,6 +106,67 @@ def joint_position_cost(env) -> Tensor:
     return (env.ref.joint_state[:, ids] - env.joint_pos[:, ids]).square().mean(-1)
 
 
+def link_velocity_cost(env) -> Tensor:
+    """Mean over the body links of the squared error of their world linear velocities (BeyondMimic's body
+    velocity term): the reference's timing, which positions alone reward only once the error has grown."""
+    ids = env.scene.body_link_ids
+    return (env.ref.link_vel[:, ids] - env.link_vel[:, ids]).square().sum(-1).mean(-1)
+
+
+def joint_velocity_cost(env) -> Tensor:
+    """Mean squared error of the body joints' velocities to the reference state's (with the pelvis' and the
+    links' linear velocities it fixes the links' angular velocities, which no sensor here measures)."""
+    ids = env.body_actuator_ids
+    return (env.ref.joint_vel[:, ids] - env.joint_vel[:, ids]).square().mean(-1)
+
+
+def _relative_to_root(heading: Tensor, root_pos: Tensor, pos: Tensor) -> Tensor:
+    return _in_heading(heading, (pos - root_pos)[:, None])[:, 0]
+
+
+def object_relative_position_cost(env) -> Tensor:
+    """|p_o - p_o_hat|^2 with each object position relative to its own pelvis, in its heading frame: where the
+    object is held, apart from where the robot stands (which root_position_cost scores)."""
+    sim = _relative_to_root(env.heading_matrix, env.root_pos, env.object_pos)
+    ref = _relative_to_root(env.ref_heading_matrix, env.ref.root_pos, env.ref.object_pos)
+    return (sim - ref).square().sum(-1)
+
+
+def object_relative_rotation_cost(env) -> Tensor:
+    """angle(H^T R_o, H_hat^T R_o_hat)^2: the object's orientation in the robot's heading frame."""
+    sim = env.heading_matrix.transpose(-1, -2) @ env.object_rotmat
+    ref = env.ref_heading_matrix.transpose(-1, -2) @ env.ref.object_rotmat
+    cos = ((sim * ref).sum((-1, -2)) - 1.0) * 0.5
+    return torch.arccos(cos.clamp(-1.0, 1.0)).square()
+
+
+def held_contact_cost(env) -> Tensor:
+    """Hands the reference holds the object with that the contact sensors find off it (0, 1 or 2): the
+    held segments only, where contact_promotion_cost's sigma margin is not used."""
+    need = env.ref.hand_contact.float()
+    return (need * (1.0 - env.hand_contact_found.float())).sum(-1)
+
+
+def action_rate_cost(env) -> Tensor:
+    """|a_t - a_{t-1}|^2 over every action (a penalty term): the jitter a real actuator pays for."""
+    return (env.actions - env.last_actions).square().sum(-1)
+
+
+def joint_limit_cost(env, soft_fraction: float = 0.9) -> Tensor:
+    """Radians beyond the soft joint limits (the middle `soft_fraction` of each range; a penalty term), summed
+    over the body joints: a robot pressing a joint stop wears it and loses its torque margin. A joint the
+    reference itself takes past a soft limit may go as far (a robot on the reference costs nothing); not the
+    fingers: an open Inspire hand rests on its stop."""
+    ids = env.body_actuator_ids
+    low, high = env.ctrl_low[ids], env.ctrl_high[ids]
+    mid, half = 0.5 * (high + low), 0.5 * soft_fraction * (high - low)
+    ref = env.ref.joint_state[:, ids]
+    q = env.joint_pos[:, ids]
+    below = (torch.minimum(mid - half, ref) - q).clamp(min=0.0)
+    above = (q - torch.maximum(mid + half, ref)).clamp(min=0.0)
+    return (below + above).sum(-1)
+
+
 def link_acceleration_cost(env) -> Tensor:
     """E_e^h = sum |a_h| over mapped links (finite-difference accelerations)."""
     return env.link_acc.norm(dim=-1).sum(-1)
@@ -142,20 +205,28 @@ REWARD_TERMS = {
         object_rotation_cost, link_acceleration_cost, object_acceleration_cost, contact_force_cost,
         contact_promotion_cost, contact_penalty_cost, hand_contact_cost, root_position_cost, root_orientation_cost,
         body_position_cost, body_rotation_cost, feet_position_cost, hand_position_cost, joint_position_cost,
+        link_velocity_cost, joint_velocity_cost, object_relative_position_cost, object_relative_rotation_cost,
+        held_contact_cost, action_rate_cost, joint_limit_cost,
     )
 }
 
 
 def aggregate(costs: dict[str, Tensor], weights: dict[str, float], mode: str = "product",
-              scales: dict[str, float] | None = None) -> tuple[Tensor, dict[str, Tensor]]:
+              scales: dict[str, float] | None = None,
+              penalties: frozenset[str] = frozenset()) -> tuple[Tensor, dict[str, Tensor]]:
     """The total reward and each term's exp(-lambda E): "product" exp(-sum lambda E) or "sum" (normalised by the
-    scales' total, so R stays in [0, 1] either way)."""
-    per_term = {name: torch.exp(-weights[name] * cost) for name, cost in costs.items()}
+    scales' total, so R stays in [0, 1] either way); then minus lambda E of each term in `penalties` (logged as
+    that negative value)."""
+    tracked = {name: cost for name, cost in costs.items() if name not in penalties}
+    penalty = {name: -weights[name] * cost for name, cost in costs.items() if name in penalties}
+    per_term = {name: torch.exp(-weights[name] * cost) for name, cost in tracked.items()}
     if mode == "product":
-        exponent = sum(weights[name] * cost for name, cost in costs.items())
-        return torch.exp(-exponent), per_term
-    if mode == "sum":
+        exponent = sum(weights[name] * cost for name, cost in tracked.items())
+        reward = torch.exp(-exponent)
+    elif mode == "sum":
         scales = scales or {}
-        total = sum(scales.get(name, 1.0) for name in costs)
-        return sum(scales.get(name, 1.0) * value for name, value in per_term.items()) / total, per_term
-    raise ValueError(f"reward mode must be 'product' or 'sum', not {mode!r}")
+        total = sum(scales.get(name, 1.0) for name in tracked)
+        reward = sum(scales.get(name, 1.0) * value for name, value in per_term.items()) / total
+    else:
+        raise ValueError(f"reward mode must be 'product' or 'sum', not {mode!r}")
+    return reward + sum(penalty.values(), torch.zeros_like(reward)), per_term | penalty
