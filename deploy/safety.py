@@ -157,6 +157,13 @@ def action_fault(action: np.ndarray, contract: PolicyContract, config: SafetyCon
     return None
 
 
+def rate_limited(target, previous, max_step):
+    """`target` moved at most `max_step` (rad) from `previous`, joint by joint. numpy arrays or torch tensors
+    (their shared `clip`): the runtime shapes each tick's targets with it, and students train with the same limit
+    (robot_hoi.tasks.interaction.env), so the commands a policy learned with are the ones the robot gets."""
+    return previous + (target - previous).clip(-max_step, max_step)
+
+
 class TargetShaper:
     """Clamp to joint limits, then limit the per-tick change; counts what it had to change by more than
     `report_tolerance` radians (a policy holding a joint at its stop overshoots by micro-radians every tick:
@@ -183,8 +190,7 @@ class TargetShaper:
         self.last_clamped = np.abs(clamped - target) > self.report_tolerance
         shaped = clamped
         if self.previous is not None:
-            shaped = np.clip(clamped, self.previous - self.max_step, self.previous + self.max_step)
-            shaped = np.clip(shaped, self.lower, self.upper)
+            shaped = np.clip(rate_limited(clamped, self.previous, self.max_step), self.lower, self.upper)
         self.last_rate_limited = np.abs(shaped - clamped) > self.report_tolerance
         self.clamped_ticks += bool(self.last_clamped.any())
         self.rate_limited_ticks += bool(self.last_rate_limited.any())

@@ -10,6 +10,7 @@ from dataclasses import asdict
 from pathlib import Path
 
 from deploy.atomic import atomic_write_text
+from deploy.safety import SafetyConfig
 from robot_hoi.embodiment import load_embodiment
 from robot_hoi.errors import UserError
 from robot_hoi.rl.evaluation import protocol_env_cfg
@@ -33,9 +34,13 @@ def evaluation_cfg(env_cfg: InteractionEnvCfg, num_envs: int, seed: int = 0, pro
 
 def student_env_cfg(env_cfg: InteractionEnvCfg) -> InteractionEnvCfg:
     """The teachers' env config with the deployable observation group switched on (its terms: the config's, e.g.
-    from --option object_free, else DEFAULT_STUDENT_TERMS)."""
+    from --option object_free, else DEFAULT_STUDENT_TERMS) and the robot runtime's limit on how fast PD targets
+    move (unless the config sets one): a student that leaned on faster target steps fell in sim2sim's turns, where
+    the runtime cut them."""
     cfg = copy.deepcopy(env_cfg)
     cfg.student_obs_terms = tuple(cfg.student_obs_terms) or DEFAULT_STUDENT_TERMS
+    if cfg.command_rate_limit is None:
+        cfg.command_rate_limit = SafetyConfig().max_target_rate
     cfg.assist.enabled = False  # the teachers' curriculum; the student learns from teachers that no longer need it
     return cfg
 

@@ -259,3 +259,17 @@ def test_shaper_reports_only_changes_beyond_a_milliradian(dev_policy):
     shaped = shaper(target)
     assert shaper.rate_limited_ticks == 1 and np.flatnonzero(shaper.last_rate_limited).tolist() == [5]
     assert abs(shaped[5] - (target[5] - 0.3)) < 1e-12
+
+
+def test_rate_limited_is_one_rule_for_numpy_and_torch():
+    """The runtime's per-tick limit (numpy) and the students' training env (torch tensors) share deploy.safety's
+    rate_limited: each joint moves at most max_step toward its target."""
+    import torch
+
+    from deploy.safety import rate_limited
+
+    previous, target = np.array([0.0, 1.0, -1.0]), np.array([0.5, 0.9, -2.0])
+    expected = np.array([0.2, 0.9, -1.2])
+    np.testing.assert_allclose(rate_limited(target, previous, 0.2), expected)
+    shaped = rate_limited(torch.tensor(target)[None], torch.tensor(previous)[None], 0.2)
+    np.testing.assert_allclose(shaped[0].numpy(), expected)

@@ -118,3 +118,17 @@ def test_deployable_skillmimic_student_exports(teacher_run, tmp_path, capsys):
     assert [r["Distill/w_ppo"] for r in rows] == [0.0, 0.0] and [r["Distill/w_distill"] for r in rows] == [1.0, 1.0]
     assert all("Sampling/masked_frames_mean" in r for r in rows) and not (out / "history_encoder.pt").exists()
     export_and_check(out / "student" / "model_2.pt", tmp_path / "smd.onnx", capsys)
+
+
+def test_students_train_with_the_runtime_target_rate_limit():
+    """A student's env limits how fast PD targets move exactly as the robot runtime does (a student trained
+    without it fell in sim2sim's turns, where the runtime cut its target steps); a limit the config sets stays."""
+    from deploy.safety import SafetyConfig
+    from robot_hoi.student.task import student_env_cfg
+    from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg
+
+    teacher = InteractionEnvCfg()
+    assert teacher.command_rate_limit is None
+    assert student_env_cfg(teacher).command_rate_limit == SafetyConfig().max_target_rate == 10.0
+    teacher.command_rate_limit = 6.0
+    assert student_env_cfg(teacher).command_rate_limit == 6.0

@@ -115,6 +115,34 @@ def test_warmup_blend_matches_the_deploy_runtime(scene):
     env.reset()
     np.testing.assert_allclose(env.action_offset()[0].numpy(), joint_pos[0], atol=1e-6)
 
+def test_command_rate_limit_shapes_targets_as_the_deploy_runtime(scene):
+    """With command_rate_limit the PD targets start from the measured joints at a reset and move at most limit x dt
+    a step, tick for tick what deploy.safety.TargetShaper sends for the same targets; off, they jump."""
+    import numpy as np
+
+    from deploy.devpolicy import make_contract
+    from deploy.embodiment import load_embodiment as load_deploy_embodiment
+    from deploy.safety import TargetShaper
+
+    env = make_env(scene, command_rate_limit=3.0)
+    env.reset()
+    contract = make_contract(load_deploy_embodiment("g1_inspire"))
+    shaper = TargetShaper(contract, env.dt, 3.0)
+    shaper.reset(env.joint_pos[0].numpy().astype(np.float64))
+    assert torch.equal(env.last_ctrl, env.joint_pos)
+    push = torch.full((8, env.num_actions), env.cfg.action_clip)
+    for _ in range(3):
+        before = env.last_ctrl.clone()
+        target = torch.minimum(env.action_offset() + env.action_scale * push, env.ctrl_high)
+        env.step(push)
+        assert (env.last_ctrl - before).abs().max() <= 3.0 * env.dt + 1e-6
+        np.testing.assert_allclose(env.last_ctrl[0].numpy(), shaper(target[0].numpy().astype(np.float64)), atol=1e-5)
+    free = make_env(scene)
+    free.reset()
+    free.step(push)
+    assert (free.last_ctrl - free.joint_pos).abs().max() > 10 * 3.0 * free.dt  # no limit: the targets jump
+
+
 def test_clip_end_truncates_with_success(scene):
     env = make_env(scene)
     env.cfg.init.stand_start_probability = 0.0

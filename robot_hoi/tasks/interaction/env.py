@@ -15,6 +15,7 @@ import torch
 from torch import Tensor
 
 from deploy.contract import warmup_offset
+from deploy.safety import rate_limited
 from robot_hoi import termination
 from robot_hoi.errors import UserError
 from robot_hoi.tasks.interaction.env_cfg import InteractionEnvCfg
@@ -190,6 +191,7 @@ class InteractionEnv:
         n, a = self.num_envs, self.num_actions
         z = lambda *s, dtype=torch.float32: torch.zeros(*s, dtype=dtype, device=self.device)  # noqa: E731
         self.actions, self.last_actions = z(n, a), z(n, a)
+        self.last_ctrl = z(n, a)  # the PD targets last commanded (where command_rate_limit moves them from)
         self.clip_id = z(n, dtype=torch.long)
         self.ref_index = z(n, dtype=torch.long)
         self.warmup_left = z(n, dtype=torch.long)
@@ -222,7 +224,11 @@ class InteractionEnv:
         if self.cfg.init.grip_settle_frames > 0:
             settle = assist_terms.grip_settle_wrench(self)
             wrench = settle if wrench is None else wrench + settle
-        ctrl = self.randomization.delayed(torch.maximum(torch.minimum(targets, self.ctrl_high), self.ctrl_low))
+        ctrl = torch.maximum(torch.minimum(targets, self.ctrl_high), self.ctrl_low)
+        if self.cfg.command_rate_limit is not None:
+            ctrl = rate_limited(ctrl, self.last_ctrl, self.cfg.command_rate_limit * self.dt)
+        self.last_ctrl = ctrl.clone()  # the delay line may hold `ctrl`; resets write into last_ctrl
+        ctrl = self.randomization.delayed(ctrl)
         self.randomization.push(self.dt)
         self.backend.step(ctrl, wrench)
         timers.lap("physics")
@@ -528,6 +534,7 @@ class InteractionEnv:
         self._update_state(None if n == self.num_envs else env_ids)  # env_ids are distinct: n == all of them
         self.warmup_length[env_ids] = self.warmup_left[env_ids]
         self.warmup_start_pos[env_ids] = self.joint_pos[env_ids]
+        self.last_ctrl[env_ids] = self.joint_pos[env_ids]  # as the runtime's shaper starts from the measured pose
         self.prev_link_vel[env_ids] = self.link_vel[env_ids]
         self.prev_object_vel[env_ids] = self.object_lin_vel[env_ids]
         self.psi.on_reset(env_ids)

@@ -264,6 +264,10 @@ class InteractionEnvCfg:
     impratio: float = 1.0
     self_collision: bool = False
     action_clip: float = 4.0
+    # rad/s: each step's PD targets move at most this far from the last step's, as the robot runtime shapes them
+    # (deploy.safety.TargetShaper, SafetyConfig.max_target_rate). None: off (teachers); students train with the
+    # runtime's limit (student.task.student_env_cfg)
+    command_rate_limit: float | None = None
     # PD target = offset + action_scale * action. "reference": offset = the retargeted reference joints of the frame
     # being stepped to (the policy learns corrections; the runtime reads them from the motion sidecar);
     # "default": offset = the default pose (InterMimic's absolute targets).
