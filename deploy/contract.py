@@ -230,6 +230,13 @@ class PolicyContract:
         return tracked_poses(self.obs_names)
 
     @property
+    def trained_rate_limit(self) -> float | None:
+        """rad/s the policy's PD targets were limited to in training (its task's command_rate_limit), if any."""
+        env = (self.task or {}).get("env", {})
+        value = env.get("command_rate_limit")
+        return None if value is None else float(value)
+
+    @property
     def needs_tracker(self) -> bool:
         return bool(self.tracked_poses)
 

@@ -114,7 +114,10 @@ class Runtime:
         self.expected_mode_machine = expected_mode_machine
         self.num_body = contract.num_body
         self.needs_tracker = contract.needs_tracker  # terms that read a tracked pose (contract.tracked_poses)
-        self.shaper = TargetShaper(contract, self.dt, self.safety.max_target_rate)
+        # the safety limit, or the tighter one the policy trained under (its commands are shaped as in training)
+        trained = contract.trained_rate_limit
+        self.shaper = TargetShaper(contract, self.dt, self.safety.max_target_rate if trained is None
+                                   else min(trained, self.safety.max_target_rate))
         stall = self.safety.max_stall_periods
         self.timing = LoopTiming(self.dt, self.safety.max_overruns, self.safety.overrun_window_s,
                                  None if stall is None else stall * self.dt)

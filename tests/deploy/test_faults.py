@@ -273,3 +273,22 @@ def test_rate_limited_is_one_rule_for_numpy_and_torch():
     np.testing.assert_allclose(rate_limited(target, previous, 0.2), expected)
     shaped = rate_limited(torch.tensor(target)[None], torch.tensor(previous)[None], 0.2)
     np.testing.assert_allclose(shaped[0].numpy(), expected)
+
+
+def test_the_shaper_applies_the_tighter_of_the_safety_and_the_trained_rate_limit(rig):
+    """A policy trained under a target rate limit (its task's command_rate_limit) gets its commands shaped as in
+    training when that limit is tighter than the runtime's; a looser or absent one leaves the safety limit."""
+    import dataclasses
+
+    from deploy.loop import Runtime
+    from deploy.observations import ObservationBuilder
+    from deploy.operator import OperatorInput
+
+    assert rig.contract.trained_rate_limit is None
+    assert rig.runtime.shaper.max_step == pytest.approx(10.0 * rig.dt)
+    for limit, expected in ((6.0, 6.0), (25.0, 10.0)):
+        contract = dataclasses.replace(rig.contract, task={"env": {"command_rate_limit": limit}})
+        assert contract.trained_rate_limit == limit
+        runtime = Runtime(contract, rig.policy, ObservationBuilder(contract, rig.motion), rig.body, rig.tracker,
+                          rig.hands, clock=rig.clock, safety=rig.safety, operator=OperatorInput(), events=rig.events)
+        assert runtime.shaper.max_step == pytest.approx(expected * rig.dt)
