@@ -13,7 +13,7 @@ import pytest
 import torch
 
 from robot_hoi.tasks.interaction.mdp import rewards as R
-from robot_hoi.utils.torch_rot import quat_from_yaw, quat_to_matrix
+from robot_hoi.utils.torch_rot import quat_from_yaw, quat_mul, quat_to_matrix
 
 F64 = torch.float64
 
@@ -172,25 +172,26 @@ def test_object_relative_costs_follow_the_pelvis():
     """The object relative to the pelvis in its heading frame: robot and object moved and turned together cost 0;
     the object 0.1 m off the pelvis' frame costs 0.01; tilted 0.5 rad in that frame, 0.25."""
     yaw = torch.tensor([0.7], dtype=F64)
-    heading = quat_to_matrix(quat_from_yaw(yaw))
+    turn = quat_from_yaw(yaw)
+    heading = quat_to_matrix(turn)
     shift = torch.tensor([[1.0, -2.0, 0.0]], dtype=F64)
     ref = _env().ref
     obj = (ref.object_pos - ref.root_pos) @ heading[0].T + ref.root_pos + shift
-    env = _env(root_pos=ref.root_pos + shift, heading_matrix=heading, object_pos=obj,
-               object_rotmat=heading.clone())
-    env.ref.object_rotmat = torch.eye(3, dtype=F64)[None]
+    env = _env(root_pos=ref.root_pos + shift, root_quat=turn, heading_matrix=heading, object_pos=obj,
+               object_quat=turn.clone())
     assert R.object_relative_position_cost(env).item() == pytest.approx(0.0, abs=1e-12)
     assert R.object_relative_rotation_cost(env).item() == pytest.approx(0.0, abs=1e-12)
     env.object_pos = obj + torch.tensor([[0.0, 0.0, 0.1]], dtype=F64)
     assert R.object_relative_position_cost(env).item() == pytest.approx(0.01)
-    env.object_rotmat = heading @ quat_to_matrix(_quat_x(0.5)[None])
+    env.object_quat = quat_mul(turn, _quat_x(0.5)[None])
     assert R.object_relative_rotation_cost(env).item() == pytest.approx(0.25)
 
 
-def test_held_contact_cost_counts_required_hands_without_contact():
+def test_contact_promotion_cost_counts_required_hands_without_contact():
+    """The tracking set's held-contact term: hands the reference holds with that the contact sensors find off."""
     env = _env(hand_contact_found=torch.tensor([[True, False], [False, False], [True, True]]))
     env.ref.hand_contact = torch.tensor([[True, True], [False, True], [False, False]])
-    assert R.held_contact_cost(env).tolist() == [1.0, 1.0, 0.0]  # a contact nobody asked for costs nothing here
+    assert R.contact_promotion_cost(env).tolist() == [1.0, 1.0, 0.0]  # a contact nobody asked for costs nothing here
 
 
 def test_action_rate_and_joint_limit_penalties():

@@ -19,7 +19,7 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
-from robot_hoi.utils.torch_rot import quat_diff_angle
+from robot_hoi.utils.torch_rot import quat_conj, quat_diff_angle, quat_mul, yaw_quat
 
 
 def _error(x: Tensor, squared: bool) -> Tensor:
@@ -133,18 +133,11 @@ def object_relative_position_cost(env) -> Tensor:
 
 
 def object_relative_rotation_cost(env) -> Tensor:
-    """angle(H^T R_o, H_hat^T R_o_hat)^2: the object's orientation in the robot's heading frame."""
-    sim = env.heading_matrix.transpose(-1, -2) @ env.object_rotmat
-    ref = env.ref_heading_matrix.transpose(-1, -2) @ env.ref.object_rotmat
-    cos = ((sim * ref).sum((-1, -2)) - 1.0) * 0.5
-    return torch.arccos(cos.clamp(-1.0, 1.0)).square()
-
-
-def held_contact_cost(env) -> Tensor:
-    """Hands the reference holds the object with that the contact sensors find off it (0, 1 or 2): the
-    held segments only, where contact_promotion_cost's sigma margin is not used."""
-    need = env.ref.hand_contact.float()
-    return (need * (1.0 - env.hand_contact_found.float())).sum(-1)
+    """angle(H^-1 q_o, H_hat^-1 q_o_hat)^2, H the pelvis' heading: the object's orientation in the robot's heading
+    frame."""
+    sim = quat_mul(quat_conj(yaw_quat(env.root_quat)), env.object_quat)
+    ref = quat_mul(quat_conj(yaw_quat(env.ref.root_quat_wxyz)), env.ref.object_quat_wxyz)
+    return quat_diff_angle(ref, sim).square()
 
 
 def action_rate_cost(env) -> Tensor:
@@ -206,7 +199,7 @@ REWARD_TERMS = {
         contact_promotion_cost, contact_penalty_cost, hand_contact_cost, root_position_cost, root_orientation_cost,
         body_position_cost, body_rotation_cost, feet_position_cost, hand_position_cost, joint_position_cost,
         link_velocity_cost, joint_velocity_cost, object_relative_position_cost, object_relative_rotation_cost,
-        held_contact_cost, action_rate_cost, joint_limit_cost,
+        action_rate_cost, joint_limit_cost,
     )
 }
 
